@@ -1,0 +1,35 @@
+# One entry point per job. `make test` creates .venv, installs everything and runs the suite.
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+
+.PHONY: venv run demo test lint bench openapi clean
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[dev]'
+	touch $(STAMP)
+
+venv: $(STAMP)
+
+# Main job: until the service exists, the CLI on a synthetic cloud it generates.
+run: demo
+demo: $(STAMP)
+	mkdir -p data
+	$(PY) -m curvature.synthetic torus --n 20000 --noise 0.1 --seed 1 -o data/demo_torus.ply
+	$(PY) -m curvature estimate data/demo_torus.ply -o data/demo_torus_curvature.ply
+
+test: $(STAMP)
+	$(PY) -m ruff check .
+	$(PY) -m pytest -q
+
+lint: $(STAMP)
+	$(PY) -m ruff check .
+
+bench: $(STAMP)
+	$(PY) benchmarks/speed.py
+
+clean:
+	rm -rf $(VENV) data .pytest_cache

@@ -1,0 +1,7 @@
+"""Placeholder."""
+FITS = ("implicit", "monge")
+ORIENTATIONS = ("auto", "normals", "viewpoint")
+
+
+def estimate(*args, **kwargs):
+    raise NotImplementedError

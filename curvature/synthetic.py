@@ -1,0 +1,1 @@
+"""Synthetic shapes (placeholder until the module lands)."""
