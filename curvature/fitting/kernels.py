@@ -1,0 +1,309 @@
+"""Per-point quadric fits over CSR neighborhoods, parallel over query points (numba).
+
+Every query point is independent, so the results do not depend on the number of threads.
+Coordinates are translated to the query point p and divided by the RMS neighbor distance before
+fitting (DESIGN.md 4.5); curvature is scaled back at the end.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from .linalg import cholesky, generalized_smallest, jacobi_eigh, smallest_eigvec, solve_lower, \
+    solve_upper_t
+from .quadric import DEGENERATE, NO_FOOT, NON_FINITE, OK, TOO_FEW, foot_point, sampson_rms, \
+    shape_operator
+
+FIT_IMPLICIT = 0
+FIT_MONGE = 1
+SOLVER_TAUBIN = 0
+SOLVER_ALGEBRAIC = 1
+SQRT2 = np.sqrt(2.0)
+# Fewest fitted points (p included) that determine each model: 9 Taubin unknowns up to scale,
+# 6 Monge coefficients.
+MIN_POINTS_IMPLICIT = 9
+MIN_POINTS_MONGE = 6
+# A foot point farther than this many RMS neighbor distances means the fit missed p.
+MAX_FOOT_DIST = 2.0
+
+
+@njit(cache=True)
+def gather_local(points, q, nbr, include_self):
+    """Neighbors (and optionally p) relative to p = points[q], scaled to unit RMS distance.
+
+    Returns
+    -------
+    xs : ndarray, shape (m, 3)
+        Scaled local coordinates; p itself, when included, is row 0 at the origin.
+    scale : float
+        RMS distance of the neighbors to p (0 when they all coincide with p).
+    """
+    k = nbr.shape[0]
+    off = 1 if include_self else 0
+    xs = np.zeros((k + off, 3))
+    p = points[q]
+    ss = 0.0
+    for i in range(k):
+        for d in range(3):
+            v = points[nbr[i], d] - p[d]
+            xs[i + off, d] = v
+            ss += v * v
+    scale = np.sqrt(ss / k) if k > 0 else 0.0
+    if scale > 0.0:
+        xs /= scale
+    return xs, scale
+
+
+@njit(cache=True)
+def quadric_from_coeffs(v):
+    """Split 10 coefficients of the rotation-invariant monomial basis into A (3, 3), b (3,), c.
+
+    Basis: x^2, y^2, z^2, sqrt2 xy, sqrt2 yz, sqrt2 xz, x, y, z, 1; with the sqrt2 weights the
+    coefficient norm equals |A|_F^2 + |b|^2 + c^2, which rotations leave unchanged.
+    """
+    a = np.empty((3, 3))
+    a[0, 0] = v[0]
+    a[1, 1] = v[1]
+    a[2, 2] = v[2]
+    a[0, 1] = a[1, 0] = v[3] / SQRT2
+    a[1, 2] = a[2, 1] = v[4] / SQRT2
+    a[0, 2] = a[2, 0] = v[5] / SQRT2
+    b = np.array([v[6], v[7], v[8]])
+    return a, b, v[9]
+
+
+@njit(cache=True)
+def monomials(x, out):
+    """The 9 non-constant monomials of :func:`quadric_from_coeffs` at x (3,) into out (9,)."""
+    out[0] = x[0] * x[0]
+    out[1] = x[1] * x[1]
+    out[2] = x[2] * x[2]
+    out[3] = SQRT2 * x[0] * x[1]
+    out[4] = SQRT2 * x[1] * x[2]
+    out[5] = SQRT2 * x[0] * x[2]
+    out[6] = x[0]
+    out[7] = x[1]
+    out[8] = x[2]
+
+
+@njit(cache=True)
+def fit_implicit(xs, solver):
+    """General quadric through local points, Taubin or algebraic.
+
+    Parameters
+    ----------
+    xs : ndarray, shape (m, 3)
+        Scaled local coordinates.
+    solver : int
+        SOLVER_TAUBIN or SOLVER_ALGEBRAIC.
+
+    Returns
+    -------
+    a, b, c
+        The quadric F = x'Ax + b'x + c.
+    ok : bool
+        False when the problem is rank deficient.
+    """
+    m = xs.shape[0]
+    z = np.empty(9)
+    coeffs = np.zeros(10)
+    if solver == SOLVER_TAUBIN:
+        # Centring the monomials eliminates the constant (its gradient is zero, which makes the
+        # full 10x10 Taubin metric singular) and leaves a 9x9 generalized eigenproblem.
+        mean = np.zeros(9)
+        for i in range(m):
+            monomials(xs[i], z)
+            mean += z
+        mean /= m
+        mm = np.zeros((9, 9))
+        nn = np.zeros((9, 9))
+        for i in range(m):
+            monomials(xs[i], z)
+            z -= mean
+            for r in range(9):
+                for s in range(r, 9):
+                    mm[r, s] += z[r] * z[s]
+            x, y, w = xs[i, 0], xs[i, 1], xs[i, 2]
+            # Gradient rows of the 9 monomials, only nonzero entries: metric = sum J J'.
+            jac = np.array([
+                [2 * x, 0.0, 0.0], [0.0, 2 * y, 0.0], [0.0, 0.0, 2 * w],
+                [SQRT2 * y, SQRT2 * x, 0.0], [0.0, SQRT2 * w, SQRT2 * y],
+                [SQRT2 * w, 0.0, SQRT2 * x],
+                [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+            for r in range(9):
+                for s in range(r, 9):
+                    nn[r, s] += (jac[r, 0] * jac[s, 0] + jac[r, 1] * jac[s, 1]
+                                 + jac[r, 2] * jac[s, 2])
+        for r in range(9):
+            for s in range(r + 1, 9):
+                mm[s, r] = mm[r, s]
+                nn[s, r] = nn[r, s]
+        vec, _lam, ok = generalized_smallest(mm / m, nn / m, 1e-12)
+        if not ok:
+            return np.zeros((3, 3)), np.zeros(3), 0.0, False
+        coeffs[:9] = vec
+        coeffs[9] = -np.sum(mean * vec)
+    else:
+        mm = np.zeros((10, 10))
+        z10 = np.ones(10)
+        for i in range(m):
+            monomials(xs[i], z)
+            z10[:9] = z
+            for r in range(10):
+                for s in range(r, 10):
+                    mm[r, s] += z10[r] * z10[s]
+        for r in range(10):
+            for s in range(r + 1, 10):
+                mm[s, r] = mm[r, s]
+        vec, _lam = smallest_eigvec(mm / m, 200, 1e-12)
+        coeffs[:] = vec
+    a, b, c = quadric_from_coeffs(coeffs)
+    return a, b, c, True
+
+
+@njit(cache=True)
+def fit_monge(xs):
+    """Height function h(u, v) = a u^2 + b uv + c v^2 + d u + e v + f in a PCA frame.
+
+    Returns the quadric F = h(u, v) - w in local coordinates (rotated back to the input axes).
+
+    Parameters
+    ----------
+    xs : ndarray, shape (m, 3)
+        Scaled local coordinates.
+
+    Returns
+    -------
+    a, b, c
+        The quadric F = x'Ax + b'x + c in the input axes.
+    ok : bool
+        False when the points do not span a plane or the normal equations are singular.
+    """
+    m = xs.shape[0]
+    centroid = np.zeros(3)
+    for i in range(m):
+        centroid += xs[i]
+    centroid /= m
+    cov = np.zeros((3, 3))
+    for i in range(m):
+        d = xs[i] - centroid
+        for r in range(3):
+            for s in range(3):
+                cov[r, s] += d[r] * d[s]
+    w, v = jacobi_eigh(cov / m)
+    if not w[1] > 1e-10 * w[2]:  # collinear: no tangent plane
+        return np.zeros((3, 3)), np.zeros(3), 0.0, False
+    # Frame columns: u, v (largest spreads), n (smallest), right-handed.
+    frame = np.empty((3, 3))
+    frame[:, 0] = v[:, 2]
+    frame[:, 1] = v[:, 1]
+    frame[:, 2] = np.cross(v[:, 2], v[:, 1])
+    ata = np.zeros((6, 6))
+    atb = np.zeros(6)
+    row = np.empty(6)
+    for i in range(m):
+        uvw = xs[i] @ frame
+        u, vv, h = uvw[0], uvw[1], uvw[2]
+        row[0] = u * u
+        row[1] = u * vv
+        row[2] = vv * vv
+        row[3] = u
+        row[4] = vv
+        row[5] = 1.0
+        for r in range(6):
+            atb[r] += row[r] * h
+            for s in range(r, 6):
+                ata[r, s] += row[r] * row[s]
+    for r in range(6):
+        for s in range(r + 1, 6):
+            ata[s, r] = ata[r, s]
+    l, ok = cholesky(ata, 1e-13)
+    if not ok:
+        return np.zeros((3, 3)), np.zeros(3), 0.0, False
+    coef = solve_upper_t(l, solve_lower(l, atb))
+    # F = h(u, v) - w in frame coordinates, then x = frame @ (u, v, w) back to input axes.
+    a_loc = np.zeros((3, 3))
+    a_loc[0, 0] = coef[0]
+    a_loc[1, 1] = coef[2]
+    a_loc[0, 1] = a_loc[1, 0] = 0.5 * coef[1]
+    b_loc = np.array([coef[3], coef[4], -1.0])
+    a = frame @ a_loc @ frame.T
+    b = frame @ b_loc
+    return a, b, coef[5], True
+
+
+@njit(parallel=True, cache=True)
+def fit_batch(points, query, indptr, indices, fit, solver, include_self,
+              k1, k2, normals, dir1, dir2, residual, status):
+    """Fit every query point's neighborhood and write curvature into the output arrays.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3), float64
+        The cloud.
+    query : ndarray, shape (m,), int64
+        Query point indices.
+    indptr : ndarray, shape (m + 1,), int64
+    indices : ndarray, shape (nnz,), int32 or int64
+        Neighborhoods of the query points (CSR, query point not listed).
+    fit : int
+        FIT_IMPLICIT or FIT_MONGE.
+    solver : int
+        SOLVER_TAUBIN or SOLVER_ALGEBRAIC (implicit only).
+    include_self : bool
+        Whether p itself takes part in the fit.
+    k1, k2, residual : ndarray, shape (m,), float64
+        Outputs, NaN where the status is not OK.
+    normals, dir1, dir2 : ndarray, shape (m, 3), float64
+        Outputs: unnormalised-sign unit normal (sign fixed later by orientation) and directions.
+    status : ndarray, shape (m,), int8
+        Output status codes.
+    """
+    m = query.shape[0]
+    need = MIN_POINTS_IMPLICIT if fit == FIT_IMPLICIT else MIN_POINTS_MONGE
+    for j in prange(m):
+        k1[j] = np.nan
+        k2[j] = np.nan
+        residual[j] = np.nan
+        for d in range(3):
+            normals[j, d] = np.nan
+            dir1[j, d] = np.nan
+            dir2[j, d] = np.nan
+        nbr = indices[indptr[j]:indptr[j + 1]]
+        count = nbr.shape[0] + (1 if include_self else 0)
+        if count < need:
+            status[j] = TOO_FEW
+            continue
+        xs, scale = gather_local(points, query[j], nbr, include_self)
+        if not scale > 0.0:
+            status[j] = DEGENERATE
+            continue
+        if fit == FIT_IMPLICIT:
+            a, b, c, ok = fit_implicit(xs, solver)
+        else:
+            a, b, c, ok = fit_monge(xs)
+        if not ok:
+            status[j] = DEGENERATE
+            continue
+        x0, found = foot_point(a, b, c, MAX_FOOT_DIST)
+        if not found:
+            status[j] = NO_FOOT
+            continue
+        g = 2.0 * (a @ x0) + b
+        c1, c2, n, d1, d2 = shape_operator(g, 2.0 * a)
+        res = sampson_rms(a, b, c, xs) * scale
+        c1 /= scale
+        c2 /= scale
+        if not (np.isfinite(c1) and np.isfinite(c2) and np.all(np.isfinite(n))
+                and np.all(np.isfinite(d1))):
+            status[j] = NON_FINITE
+            continue
+        k1[j] = c1
+        k2[j] = c2
+        residual[j] = res
+        for d in range(3):
+            normals[j, d] = n[d]
+            dir1[j, d] = d1[d]
+            dir2[j, d] = d2[d]
+        status[j] = OK

@@ -1,0 +1,144 @@
+"""Curvature of an implicit quadric F(x) = x'Ax + b'x + c at the foot point of the origin.
+
+Shared by both fit models: the Monge height function h(u, v) - w is a quadric too, so one routine
+finds the foot point and evaluates the shape operator for all of them.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+# Status codes (curvature.status.Status), repeated as plain ints for numba.
+OK = 0
+TOO_FEW = 1
+DEGENERATE = 2
+NO_FOOT = 3
+NON_FINITE = 4
+
+
+@njit(cache=True)
+def quadric_value_grad(a, b, c, x):
+    """F(x) and grad F(x) for F = x'Ax + b'x + c; ``a`` (3, 3) symmetric, ``b`` (3,)."""
+    ax = a @ x
+    f = np.sum(x * ax) + np.sum(b * x) + c
+    g = 2.0 * ax + b
+    return f, g
+
+
+@njit(cache=True)
+def foot_point(a, b, c, max_dist):
+    """Point of F = 0 reached from the origin by gradient projection steps.
+
+    Iterates x <- x - F g / |g|^2 (DESIGN.md 4.5), which lands on the surface along the
+    gradient field; for a point near the surface it agrees with the closest point to second order
+    in the distance.
+
+    Parameters
+    ----------
+    a : ndarray, shape (3, 3)
+    b : ndarray, shape (3,)
+    c : float
+    max_dist : float
+        A foot point farther than this from the origin is rejected.
+
+    Returns
+    -------
+    x : ndarray, shape (3,)
+        Foot point.
+    ok : bool
+        False when the iteration stalls on a vanishing gradient, does not converge, or leaves
+        the ball of radius ``max_dist``.
+    """
+    x = np.zeros(3)
+    for _ in range(30):
+        f, g = quadric_value_grad(a, b, c, x)
+        gg = np.sum(g * g)
+        if not gg > 1e-24:
+            return x, False
+        step = f / gg
+        x = x - step * g
+        if np.sum(x * x) > max_dist * max_dist:
+            return x, False
+        if abs(step) * np.sqrt(gg) < 1e-13:
+            return x, True
+    f, g = quadric_value_grad(a, b, c, x)
+    return x, abs(f) < 1e-9 * np.sqrt(np.sum(g * g))
+
+
+@njit(cache=True)
+def tangent_basis(n):
+    """Two unit vectors completing the unit normal ``n`` (3,) to a right-handed frame."""
+    ax = np.abs(n)
+    if ax[0] <= ax[1] and ax[0] <= ax[2]:
+        helper = np.array([1.0, 0.0, 0.0])
+    elif ax[1] <= ax[2]:
+        helper = np.array([0.0, 1.0, 0.0])
+    else:
+        helper = np.array([0.0, 0.0, 1.0])
+    t1 = np.cross(n, helper)
+    t1 /= np.sqrt(np.sum(t1 * t1))
+    t2 = np.cross(n, t1)
+    return t1, t2
+
+
+@njit(cache=True)
+def shape_operator(g, hess):
+    """Principal curvatures and directions of an implicit surface at a point.
+
+    The shape operator of F = 0 is P H P / |g| on the tangent plane (P = I - n n', n = g/|g|).
+    Its eigenvalues are the principal curvatures, positive where the surface bends away from n
+    (a sphere |x|^2 - r^2 gives +1/r with the outward n).
+
+    Parameters
+    ----------
+    g : ndarray, shape (3,)
+        Gradient of F at the point (nonzero).
+    hess : ndarray, shape (3, 3)
+        Hessian of F.
+
+    Returns
+    -------
+    k1, k2 : float
+        Principal curvatures, k1 >= k2.
+    n, d1, d2 : ndarray, shape (3,)
+        Unit normal g/|g| and unit principal directions of k1 and k2 (d2 = n x d1).
+    """
+    gn = np.sqrt(np.sum(g * g))
+    n = g / gn
+    t1, t2 = tangent_basis(n)
+    h1 = hess @ t1
+    h2 = hess @ t2
+    s11 = np.sum(t1 * h1) / gn
+    s12 = 0.5 * (np.sum(t1 * h2) + np.sum(t2 * h1)) / gn
+    s22 = np.sum(t2 * h2) / gn
+    half_tr = 0.5 * (s11 + s22)
+    rad = np.sqrt(0.25 * (s11 - s22) ** 2 + s12 * s12)
+    k1 = half_tr + rad
+    k2 = half_tr - rad
+    # Eigenvector of k1 in the (t1, t2) basis; pick the better-conditioned of two formulas.
+    if s11 >= s22:
+        e1 = k1 - s22
+        e2 = s12
+    else:
+        e1 = s12
+        e2 = k1 - s11
+    en = np.sqrt(e1 * e1 + e2 * e2)
+    if en > 0.0:
+        d1 = (e1 * t1 + e2 * t2) / en
+    else:  # umbilic: any tangent direction is principal
+        d1 = t1.copy()
+    d2 = np.cross(n, d1)
+    return k1, k2, n, d1, d2
+
+
+@njit(cache=True)
+def sampson_rms(a, b, c, xs):
+    """RMS first-order distance |F(x)| / |grad F(x)| of points ``xs`` (m, 3) to F = 0."""
+    total = 0.0
+    m = xs.shape[0]
+    for i in range(m):
+        f, g = quadric_value_grad(a, b, c, xs[i])
+        gg = np.sum(g * g)
+        total += f * f / gg if gg > 1e-300 else f * f
+    return np.sqrt(total / m)

@@ -1,0 +1,174 @@
+"""Consistent normal orientation (DESIGN.md 4.6).
+
+A fitted normal's sign is arbitrary; these functions return a sign per point (+1 keeps the
+fitted normal, -1 flips it) and :func:`apply_signs` flips normals, curvatures and directions.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
+
+from .neighborhoods.knn import knn_query
+
+# Neighbors per point in the graph the orientation propagates over.
+ORIENT_K = 10
+
+
+def signs_from_normals(est: np.ndarray, given: np.ndarray) -> np.ndarray:
+    """Signs making estimated normals agree with given ones.
+
+    Parameters
+    ----------
+    est, given : ndarray, shape (n, 3)
+        Estimated and reference normals; NaN rows keep the fitted sign.
+
+    Returns
+    -------
+    ndarray, shape (n,), int8
+    """
+    dot = np.einsum("ij,ij->i", est, given)
+    return np.where(dot < 0, -1, 1).astype(np.int8)
+
+
+def signs_from_viewpoint(points: np.ndarray, est: np.ndarray, viewpoint) -> np.ndarray:
+    """Signs making normals face ``viewpoint`` (3,), e.g. the scanner position."""
+    to_view = np.asarray(viewpoint, np.float64)[None, :] - points
+    return signs_from_normals(est, to_view)
+
+
+def signs_auto(points: np.ndarray, est: np.ndarray, tree, workers: int = 1,
+               chunk: int = 65536) -> np.ndarray:
+    """Propagate a consistent orientation over a minimum spanning tree.
+
+    The graph joins each point to its ``ORIENT_K`` nearest neighbors with weight 1 - |ni . nj|,
+    so the tree prefers edges between nearly parallel normals, where a flip is unambiguous. Each
+    connected component is seeded at the point farthest from its centroid, with the normal
+    pointing away from the centroid (outward on closed surfaces).
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+    est : ndarray, shape (n, 3)
+        Unit normals of arbitrary sign; NaN rows are left out of the graph.
+    tree : scipy.spatial.cKDTree
+        Tree over ``points``.
+    workers : int
+        Threads for the tree queries.
+    chunk : int
+        Query points per batch, to bound memory.
+
+    Returns
+    -------
+    ndarray, shape (n,), int8
+    """
+    n = points.shape[0]
+    valid = np.isfinite(est).all(axis=1)
+    k = min(ORIENT_K, n - 1)
+    rows, cols, weights = [], [], []
+    for start in range(0, n, chunk):
+        idx = np.arange(start, min(start + chunk, n), dtype=np.int64)
+        nbr, _ = knn_query(tree, points, idx, k, workers)
+        src = np.repeat(idx, k)
+        dst = nbr.ravel()
+        ok = valid[src] & valid[dst] & (src < dst)  # one direction per pair suffices
+        src, dst = src[ok], dst[ok]
+        dot = np.abs(np.einsum("ij,ij->i", est[src], est[dst]))
+        # Zero weights would read as missing edges; keep them strictly positive.
+        w = np.maximum(1.0 - dot, 0.0) + 1e-12
+        rows.append(src)
+        cols.append(dst)
+        weights.append(w)
+    # The smaller index first, so mutual neighbors appear once.
+    graph = coo_matrix((np.concatenate(weights), (np.concatenate(rows), np.concatenate(cols))),
+                       shape=(n, n)).tocsr()
+    graph.sum_duplicates()
+    tree_graph = minimum_spanning_tree(graph)
+    sym = (tree_graph + tree_graph.T).tocsr()
+    n_comp, labels = connected_components(sym, directed=False)
+    seeds = component_seeds(points, labels, n_comp, valid)
+    centroids = component_centroids(points, labels, n_comp, valid)
+    return propagate_signs(sym.indptr.astype(np.int64), sym.indices.astype(np.int64), est,
+                           seeds, centroids[labels[seeds]], points)
+
+
+def component_centroids(points, labels, n_comp, valid) -> np.ndarray:
+    """Centroid of the valid points of each component, shape (n_comp, 3)."""
+    w = valid.astype(np.float64)
+    counts = np.maximum(np.bincount(labels, weights=w, minlength=n_comp), 1.0)
+    return np.stack([np.bincount(labels, weights=points[:, d] * w, minlength=n_comp) / counts
+                     for d in range(3)], axis=1)
+
+
+def component_seeds(points, labels, n_comp, valid) -> np.ndarray:
+    """Index of each component's valid point farthest from its centroid, shape (c,)."""
+    cent = component_centroids(points, labels, n_comp, valid)
+    dist = np.linalg.norm(points - cent[labels], axis=1)
+    dist[~valid] = -1.0
+    # Sort by (label, -distance, index): the first entry of each label is its seed.
+    order = np.lexsort((np.arange(len(labels)), -dist, labels))
+    first = np.ones(len(order), bool)
+    first[1:] = labels[order][1:] != labels[order][:-1]
+    seeds = order[first]
+    return seeds[valid[seeds]]
+
+
+@njit(cache=True)
+def propagate_signs(indptr, indices, normals, seeds, seed_centroids, points):
+    """Breadth-first sign propagation over a spanning forest (CSR, symmetric).
+
+    Returns
+    -------
+    ndarray, shape (n,), int8
+        +1 or -1 per point; unreached points keep +1.
+    """
+    n = normals.shape[0]
+    sign = np.ones(n, np.int8)
+    seen = np.zeros(n, np.bool_)
+    queue = np.empty(n, np.int64)
+    for s in range(seeds.shape[0]):
+        root = seeds[s]
+        if seen[root]:
+            continue
+        out = 0.0
+        for d in range(3):
+            out += normals[root, d] * (points[root, d] - seed_centroids[s, d])
+        sign[root] = 1 if out >= 0.0 else -1
+        seen[root] = True
+        head = 0
+        tail = 0
+        queue[tail] = root
+        tail += 1
+        while head < tail:
+            i = queue[head]
+            head += 1
+            for e in range(indptr[i], indptr[i + 1]):
+                j = indices[e]
+                if seen[j]:
+                    continue
+                dot = 0.0
+                for d in range(3):
+                    dot += normals[i, d] * normals[j, d]
+                sign[j] = sign[i] if dot >= 0.0 else -sign[i]
+                seen[j] = True
+                queue[tail] = j
+                tail += 1
+    return sign
+
+
+def apply_signs(signs, k1, k2, normals, dir1, dir2) -> None:
+    """Flip in place where ``signs`` is -1.
+
+    Flipping the normal negates the curvatures and swaps their order (k1 >= k2 kept), so the
+    directions swap too; d2 = n x d1 still holds afterwards.
+    """
+    flip = signs < 0
+    old_k1 = k1[flip].copy()
+    k1[flip] = -k2[flip]
+    k2[flip] = -old_k1
+    normals[flip] *= -1.0
+    old_d1 = dir1[flip].copy()
+    dir1[flip] = dir2[flip]
+    dir2[flip] = old_d1
