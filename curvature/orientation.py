@@ -73,7 +73,7 @@ def signs_auto(points: np.ndarray, est: np.ndarray, tree, workers: int = 1,
         nbr, _ = knn_query(tree, points, idx, k, workers)
         src = np.repeat(idx, k)
         dst = nbr.ravel()
-        ok = valid[src] & valid[dst] & (src < dst)  # one direction per pair suffices
+        ok = valid[src] & valid[dst]
         src, dst = src[ok], dst[ok]
         dot = np.abs(np.einsum("ij,ij->i", est[src], est[dst]))
         # Zero weights would read as missing edges; keep them strictly positive.
@@ -81,10 +81,11 @@ def signs_auto(points: np.ndarray, est: np.ndarray, tree, workers: int = 1,
         rows.append(src)
         cols.append(dst)
         weights.append(w)
-    # The smaller index first, so mutual neighbors appear once.
     graph = coo_matrix((np.concatenate(weights), (np.concatenate(rows), np.concatenate(cols))),
                        shape=(n, n)).tocsr()
-    graph.sum_duplicates()
+    # k-NN is not symmetric; the union of both directions makes the graph independent of the
+    # point order (the weights of i->j and j->i are equal, so the maximum is either).
+    graph = graph.maximum(graph.T).tocsr()
     tree_graph = minimum_spanning_tree(graph)
     sym = (tree_graph + tree_graph.T).tocsr()
     n_comp, labels = connected_components(sym, directed=False)

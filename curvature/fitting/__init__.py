@@ -1,4 +1,4 @@
-"""Fit models (DESIGN.md 4.5): the paper's general implicit quadric and the Monge height function."""
+"""Fit models (DESIGN.md 4.5): the paper's general implicit quadric and the Monge height."""
 
 from __future__ import annotations
 

@@ -10,10 +10,24 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .linalg import cholesky, generalized_smallest, jacobi_eigh, smallest_eigvec, solve_lower, \
-    solve_upper_t
-from .quadric import DEGENERATE, NO_FOOT, NON_FINITE, OK, TOO_FEW, foot_point, sampson_rms, \
-    shape_operator
+from .linalg import (
+    cholesky,
+    generalized_smallest,
+    jacobi_eigh,
+    smallest_eigvec,
+    solve_lower,
+    solve_upper_t,
+)
+from .quadric import (
+    DEGENERATE,
+    NO_FOOT,
+    NON_FINITE,
+    OK,
+    TOO_FEW,
+    foot_point,
+    sampson_rms,
+    shape_operator,
+)
 
 FIT_IMPLICIT = 0
 FIT_MONGE = 1
@@ -156,29 +170,26 @@ def fit_implicit(xs, solver):
         for r in range(10):
             for s in range(r + 1, 10):
                 mm[s, r] = mm[r, s]
-        vec, _lam = smallest_eigvec(mm / m, 200, 1e-12)
+        vec, _lam = smallest_eigvec(mm / m, 100, 1e-13)
         coeffs[:] = vec
     a, b, c = quadric_from_coeffs(coeffs)
     return a, b, c, True
 
 
 @njit(cache=True)
-def fit_monge(xs):
-    """Height function h(u, v) = a u^2 + b uv + c v^2 + d u + e v + f in a PCA frame.
-
-    Returns the quadric F = h(u, v) - w in local coordinates (rotated back to the input axes).
+def principal_axes(xs):
+    """Covariance eigen-decomposition of local points.
 
     Parameters
     ----------
     xs : ndarray, shape (m, 3)
-        Scaled local coordinates.
 
     Returns
     -------
-    a, b, c
-        The quadric F = x'Ax + b'x + c in the input axes.
-    ok : bool
-        False when the points do not span a plane or the normal equations are singular.
+    w : ndarray, shape (3,)
+        Variances along the axes, ascending.
+    v : ndarray, shape (3, 3)
+        Unit axes as columns (the last is the direction of largest spread).
     """
     m = xs.shape[0]
     centroid = np.zeros(3)
@@ -191,9 +202,36 @@ def fit_monge(xs):
         for r in range(3):
             for s in range(3):
                 cov[r, s] += d[r] * d[s]
-    w, v = jacobi_eigh(cov / m)
-    if not w[1] > 1e-10 * w[2]:  # collinear: no tangent plane
-        return np.zeros((3, 3)), np.zeros(3), 0.0, False
+    return jacobi_eigh(cov / m)
+
+
+@njit(cache=True)
+def spans_surface(w):
+    """Whether the points spread in two directions (not all on a line or a point)."""
+    return w[1] > 1e-10 * w[2]
+
+
+@njit(cache=True)
+def fit_monge(xs, v):
+    """Height function h(u, v) = a u^2 + b uv + c v^2 + d u + e v + f in a PCA frame.
+
+    Returns the quadric F = h(u, v) - w in local coordinates (rotated back to the input axes).
+
+    Parameters
+    ----------
+    xs : ndarray, shape (m, 3)
+        Scaled local coordinates.
+    v : ndarray, shape (3, 3)
+        Principal axes from :func:`principal_axes` (columns, ascending spread).
+
+    Returns
+    -------
+    a, b, c
+        The quadric F = x'Ax + b'x + c in the input axes.
+    ok : bool
+        False when the normal equations are singular.
+    """
+    m = xs.shape[0]
     # Frame columns: u, v (largest spreads), n (smallest), right-handed.
     frame = np.empty((3, 3))
     frame[:, 0] = v[:, 2]
@@ -279,10 +317,14 @@ def fit_batch(points, query, indptr, indices, fit, solver, include_self,
         if not scale > 0.0:
             status[j] = DEGENERATE
             continue
+        w, axes = principal_axes(xs)
+        if not spans_surface(w):  # coincident or collinear: no surface to fit
+            status[j] = DEGENERATE
+            continue
         if fit == FIT_IMPLICIT:
             a, b, c, ok = fit_implicit(xs, solver)
         else:
-            a, b, c, ok = fit_monge(xs)
+            a, b, c, ok = fit_monge(xs, axes)
         if not ok:
             status[j] = DEGENERATE
             continue

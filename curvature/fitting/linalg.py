@@ -150,7 +150,7 @@ def generalized_smallest(mat, metric, rel_tol):
     mat : ndarray, shape (m, m)
         Symmetric positive semi-definite.
     metric : ndarray, shape (m, m)
-        Symmetric positive definite.
+        Symmetric positive semi-definite (ridged slightly before factorising).
     rel_tol : float
         Pivot tolerance of the Cholesky factorisation.
 
@@ -164,7 +164,15 @@ def generalized_smallest(mat, metric, rel_tol):
         False when ``metric`` is not numerically positive definite.
     """
     m = mat.shape[0]
-    l, ok = cholesky(metric, rel_tol)
+    # A tiny ridge keeps the metric definite where a monomial's gradient vanishes on every point
+    # (z^2 on an exact plane z = 0); scaled by the trace so it is rotation invariant.
+    ridged = metric.copy()
+    tr = 0.0
+    for i in range(m):
+        tr += metric[i, i]
+    for i in range(m):
+        ridged[i, i] += 1e-10 * tr / m
+    l, ok = cholesky(ridged, rel_tol)
     if not ok:
         return np.zeros(m), 0.0, False
     # c = L^-1 mat L^-T, formed column by column.
@@ -175,7 +183,7 @@ def generalized_smallest(mat, metric, rel_tol):
             s = 0.5 * (c[i, j] + c[j, i])
             c[i, j] = s
             c[j, i] = s
-    y, lam = smallest_eigvec(c, 200, 1e-12)
+    y, lam = smallest_eigvec(c, 100, 1e-13)
     return solve_upper_t(l, y), lam, True
 
 
@@ -194,7 +202,7 @@ def smallest_eigvec(c, max_iter, tol):
     max_iter : int
         Iteration budget before the fallback.
     tol : float
-        Convergence threshold on the change of the unit vector.
+        Convergence threshold on the eigen-residual |C y - lam y|, relative to trace(C).
 
     Returns
     -------
@@ -214,19 +222,18 @@ def smallest_eigvec(c, max_iter, tol):
     l, ok = cholesky(shifted, 1e-300)
     if ok:
         y = np.ones(m) / np.sqrt(m)
+        # Stop on the eigen-residual, not on the step: with close eigenvalues the steps are
+        # small long before y is an eigenvector.
+        target = tol * tr + 1e-300
         for _ in range(max_iter):
             z = solve_upper_t(l, solve_lower(l, y))
             norm = np.sqrt(np.sum(z * z))
             if not norm > 0.0:
                 break
-            z /= norm
-            dot = np.sum(z * y)
-            if dot < 0.0:
-                z = -z
-            diff = np.sqrt(np.sum((z - y) ** 2))
-            y = z
-            if diff < tol:
-                cy = c @ y
-                return y, np.sum(y * cy)
+            y = z / norm
+            cy = c @ y
+            lam = np.sum(y * cy)
+            if np.sqrt(np.sum((cy - lam * y) ** 2)) <= target:
+                return y, lam
     w, v = jacobi_eigh(c)
     return v[:, 0].copy(), w[0]

@@ -1,0 +1,48 @@
+"""Small dense solvers used inside the numba fit kernels."""
+
+import numpy as np
+import pytest
+import scipy.linalg
+
+from curvature.fitting.linalg import cholesky, generalized_smallest, jacobi_eigh, smallest_eigvec
+
+
+@pytest.mark.parametrize("m", [3, 6, 9, 10])
+def test_jacobi_matches_lapack(m):
+    rng = np.random.default_rng(m)
+    a = rng.normal(size=(m, m))
+    a = a + a.T
+    w, v = jacobi_eigh(a)
+    np.testing.assert_allclose(w, np.linalg.eigvalsh(a), atol=1e-12)
+    np.testing.assert_allclose(a @ v, v * w, atol=1e-12)
+    np.testing.assert_allclose(v.T @ v, np.eye(m), atol=1e-12)
+
+
+def test_generalized_smallest_matches_scipy():
+    rng = np.random.default_rng(1)
+    b = rng.normal(size=(9, 30))
+    c = rng.normal(size=(9, 40))
+    mat, metric = b @ b.T, c @ c.T
+    vec, lam, ok = generalized_smallest(mat, metric, 1e-12)
+    ref = scipy.linalg.eigh(mat, metric, eigvals_only=True)
+    assert ok
+    assert lam == pytest.approx(ref[0], rel=1e-8)
+    np.testing.assert_allclose(mat @ vec, lam * metric @ vec, atol=1e-8)
+
+
+def test_smallest_eigvec_of_singular_matrix():
+    rng = np.random.default_rng(2)
+    b = rng.normal(size=(9, 8))
+    mat = b @ b.T  # rank 8: an exact fit
+    y, lam = smallest_eigvec(mat, 200, 1e-12)
+    assert abs(lam) < 1e-12
+    assert np.linalg.norm(mat @ y) < 1e-10
+    assert np.linalg.norm(y) == pytest.approx(1.0)
+
+
+def test_cholesky_reports_indefinite_instead_of_raising():
+    _, ok = cholesky(np.array([[1.0, 2.0], [2.0, 1.0]]), 1e-12)
+    assert not ok
+    l, ok = cholesky(np.array([[4.0, 2.0], [2.0, 3.0]]), 1e-12)
+    assert ok
+    np.testing.assert_allclose(l @ l.T, [[4.0, 2.0], [2.0, 3.0]])
