@@ -18,6 +18,7 @@ from .linalg import (
     solve_lower,
     solve_upper_t,
 )
+from .moments import gradient_metric, moments4, scatter_matrix
 from .quadric import (
     DEGENERATE,
     NO_FOOT,
@@ -88,20 +89,6 @@ def quadric_from_coeffs(v):
 
 
 @njit(cache=True)
-def monomials(x, out):
-    """The 9 non-constant monomials of :func:`quadric_from_coeffs` at x (3,) into out (9,)."""
-    out[0] = x[0] * x[0]
-    out[1] = x[1] * x[1]
-    out[2] = x[2] * x[2]
-    out[3] = SQRT2 * x[0] * x[1]
-    out[4] = SQRT2 * x[1] * x[2]
-    out[5] = SQRT2 * x[0] * x[2]
-    out[6] = x[0]
-    out[7] = x[1]
-    out[8] = x[2]
-
-
-@njit(cache=True)
 def fit_implicit(xs, solver):
     """General quadric through local points, Taubin or algebraic.
 
@@ -120,57 +107,21 @@ def fit_implicit(xs, solver):
         False when the problem is rank deficient.
     """
     m = xs.shape[0]
-    z = np.empty(9)
     coeffs = np.zeros(10)
+    mom = moments4(xs)
+    scatter = scatter_matrix(mom) / m
     if solver == SOLVER_TAUBIN:
         # Centring the monomials eliminates the constant (its gradient is zero, which makes the
         # full 10x10 Taubin metric singular) and leaves a 9x9 generalized eigenproblem.
-        mean = np.zeros(9)
-        for i in range(m):
-            monomials(xs[i], z)
-            mean += z
-        mean /= m
-        mm = np.zeros((9, 9))
-        nn = np.zeros((9, 9))
-        for i in range(m):
-            monomials(xs[i], z)
-            z -= mean
-            for r in range(9):
-                for s in range(r, 9):
-                    mm[r, s] += z[r] * z[s]
-            x, y, w = xs[i, 0], xs[i, 1], xs[i, 2]
-            # Gradient rows of the 9 monomials, only nonzero entries: metric = sum J J'.
-            jac = np.array([
-                [2 * x, 0.0, 0.0], [0.0, 2 * y, 0.0], [0.0, 0.0, 2 * w],
-                [SQRT2 * y, SQRT2 * x, 0.0], [0.0, SQRT2 * w, SQRT2 * y],
-                [SQRT2 * w, 0.0, SQRT2 * x],
-                [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
-            for r in range(9):
-                for s in range(r, 9):
-                    nn[r, s] += (jac[r, 0] * jac[s, 0] + jac[r, 1] * jac[s, 1]
-                                 + jac[r, 2] * jac[s, 2])
-        for r in range(9):
-            for s in range(r + 1, 9):
-                mm[s, r] = mm[r, s]
-                nn[s, r] = nn[r, s]
-        vec, _lam, ok = generalized_smallest(mm / m, nn / m, 1e-12)
+        mean = scatter[9, :9].copy()  # the constant's row holds the monomial means
+        centred = scatter[:9, :9] - np.outer(mean, mean)
+        vec, _lam, ok = generalized_smallest(centred, gradient_metric(mom) / m, 1e-12)
         if not ok:
             return np.zeros((3, 3)), np.zeros(3), 0.0, False
         coeffs[:9] = vec
         coeffs[9] = -np.sum(mean * vec)
     else:
-        mm = np.zeros((10, 10))
-        z10 = np.ones(10)
-        for i in range(m):
-            monomials(xs[i], z)
-            z10[:9] = z
-            for r in range(10):
-                for s in range(r, 10):
-                    mm[r, s] += z10[r] * z10[s]
-        for r in range(10):
-            for s in range(r + 1, 10):
-                mm[s, r] = mm[r, s]
-        vec, _lam = smallest_eigvec(mm / m, 100, 1e-13)
+        vec, _lam = smallest_eigvec(scatter, 20, 1e-13)
         coeffs[:] = vec
     a, b, c = quadric_from_coeffs(coeffs)
     return a, b, c, True
@@ -198,10 +149,18 @@ def principal_axes(xs):
     centroid /= m
     cov = np.zeros((3, 3))
     for i in range(m):
-        d = xs[i] - centroid
-        for r in range(3):
-            for s in range(3):
-                cov[r, s] += d[r] * d[s]
+        d0 = xs[i, 0] - centroid[0]
+        d1 = xs[i, 1] - centroid[1]
+        d2 = xs[i, 2] - centroid[2]
+        cov[0, 0] += d0 * d0
+        cov[0, 1] += d0 * d1
+        cov[0, 2] += d0 * d2
+        cov[1, 1] += d1 * d1
+        cov[1, 2] += d1 * d2
+        cov[2, 2] += d2 * d2
+    cov[1, 0] = cov[0, 1]
+    cov[2, 0] = cov[0, 2]
+    cov[2, 1] = cov[1, 2]
     return jacobi_eigh(cov / m)
 
 
@@ -241,8 +200,9 @@ def fit_monge(xs, v):
     atb = np.zeros(6)
     row = np.empty(6)
     for i in range(m):
-        uvw = xs[i] @ frame
-        u, vv, h = uvw[0], uvw[1], uvw[2]
+        u = xs[i, 0] * frame[0, 0] + xs[i, 1] * frame[1, 0] + xs[i, 2] * frame[2, 0]
+        vv = xs[i, 0] * frame[0, 1] + xs[i, 1] * frame[1, 1] + xs[i, 2] * frame[2, 1]
+        h = xs[i, 0] * frame[0, 2] + xs[i, 1] * frame[1, 2] + xs[i, 2] * frame[2, 2]
         row[0] = u * u
         row[1] = u * vv
         row[2] = vv * vv

@@ -117,14 +117,46 @@ def cholesky(a, rel_tol):
 
 @njit(cache=True)
 def solve_lower(l, b):
-    """Solve ``l x = b`` for lower-triangular ``l``; ``b`` shape (m,) or (m, r)."""
+    """Solve ``l x = b`` for lower-triangular ``l`` (m, m) and a vector ``b`` (m,)."""
     m = l.shape[0]
     x = b.copy()
     for i in range(m):
+        acc = x[i]
         for k in range(i):
-            x[i] -= l[i, k] * x[k]
-        x[i] /= l[i, i]
+            acc -= l[i, k] * x[k]
+        x[i] = acc / l[i, i]
     return x
+
+
+@njit(cache=True)
+def congruence_inverse(l, mat):
+    """``L^-1 mat L^-T`` for lower-triangular ``l`` and symmetric ``mat``, both (m, m).
+
+    Written with scalar loops: slicing rows here would allocate a temporary per update.
+    """
+    m = l.shape[0]
+    t = np.empty((m, m))
+    # t = L^-1 mat, column by column (forward substitution).
+    for j in range(m):
+        for i in range(m):
+            acc = mat[i, j]
+            for k in range(i):
+                acc -= l[i, k] * t[k, j]
+            t[i, j] = acc / l[i, i]
+    # out = L^-1 t^T; symmetric, so only the lower triangle is solved and mirrored.
+    out = np.empty((m, m))
+    for j in range(m):
+        for i in range(m):
+            acc = t[j, i]
+            for k in range(i):
+                acc -= l[i, k] * out[k, j]
+            out[i, j] = acc / l[i, i]
+    for i in range(m):
+        for j in range(i + 1, m):
+            v = 0.5 * (out[i, j] + out[j, i])
+            out[i, j] = v
+            out[j, i] = v
+    return out
 
 
 @njit(cache=True)
@@ -133,9 +165,10 @@ def solve_upper_t(l, b):
     m = l.shape[0]
     x = b.copy()
     for i in range(m - 1, -1, -1):
+        acc = x[i]
         for k in range(i + 1, m):
-            x[i] -= l[k, i] * x[k]
-        x[i] /= l[i, i]
+            acc -= l[k, i] * x[k]
+        x[i] = acc / l[i, i]
     return x
 
 
@@ -175,32 +208,79 @@ def generalized_smallest(mat, metric, rel_tol):
     l, ok = cholesky(ridged, rel_tol)
     if not ok:
         return np.zeros(m), 0.0, False
-    # c = L^-1 mat L^-T, formed column by column.
-    tmp = solve_lower(l, mat)          # L^-1 mat
-    c = solve_lower(l, tmp.T.copy())   # L^-1 (L^-1 mat)^T = L^-1 mat L^-T (mat symmetric)
-    for i in range(m):
-        for j in range(i + 1, m):
-            s = 0.5 * (c[i, j] + c[j, i])
-            c[i, j] = s
-            c[j, i] = s
-    y, lam = smallest_eigvec(c, 100, 1e-13)
+    c = congruence_inverse(l, mat)
+    y, lam = smallest_eigvec(c, 20, 1e-13)
     return solve_upper_t(l, y), lam, True
 
 
 @njit(cache=True)
-def smallest_eigvec(c, max_iter, tol):
-    """Eigenvector of the smallest eigenvalue of a symmetric PSD matrix by inverse iteration.
+def solve_shifted(c, shift, y):
+    """Solve (c - shift I) z = y by LU with partial pivoting; a zero pivot is nudged.
 
-    Only this eigenvector is needed by the quadric fits, and inverse iteration with a tiny shift
-    needs a few triangular solves where a full decomposition needs thousands of rotations.
-    Falls back to :func:`jacobi_eigh` when the iteration does not settle.
+    Parameters
+    ----------
+    c : ndarray, shape (m, m)
+    shift : float
+    y : ndarray, shape (m,)
+
+    Returns
+    -------
+    ndarray, shape (m,)
+        The solution. Near an eigenvalue it is large along the eigenvector, which is what
+        inverse iteration wants, so an exactly singular pivot is replaced by a tiny one.
+    """
+    m = c.shape[0]
+    a = c.copy()
+    for i in range(m):
+        a[i, i] -= shift
+    x = y.copy()
+    tiny = 1e-300
+    for i in range(m):
+        for k in range(i):
+            tiny = max(tiny, abs(a[i, k]))
+    tiny *= 1e-15
+    for col in range(m):
+        piv = col
+        best = abs(a[col, col])
+        for r in range(col + 1, m):
+            if abs(a[r, col]) > best:
+                best = abs(a[r, col])
+                piv = r
+        if piv != col:
+            for k in range(m):
+                a[col, k], a[piv, k] = a[piv, k], a[col, k]
+            x[col], x[piv] = x[piv], x[col]
+        if abs(a[col, col]) < tiny:
+            a[col, col] = tiny
+        for r in range(col + 1, m):
+            f = a[r, col] / a[col, col]
+            if f != 0.0:
+                for k in range(col, m):
+                    a[r, k] -= f * a[col, k]
+                x[r] -= f * x[col]
+    for i in range(m - 1, -1, -1):
+        acc = x[i]
+        for k in range(i + 1, m):
+            acc -= a[i, k] * x[k]
+        x[i] = acc / a[i, i]
+    return x
+
+
+@njit(cache=True)
+def smallest_eigvec(c, max_iter, tol):
+    """Eigenvector of the smallest eigenvalue of a symmetric PSD matrix.
+
+    Only this eigenvector is needed by the quadric fits. A few steps of inverse iteration steer
+    towards it, Rayleigh quotient iteration then converges cubically, and a Cholesky test of
+    c - (lam - delta) I certifies that no eigenvalue lies below the one found. Falls back to
+    :func:`jacobi_eigh` when the iteration does not settle or the certificate fails.
 
     Parameters
     ----------
     c : ndarray, shape (m, m)
         Symmetric positive semi-definite matrix.
     max_iter : int
-        Iteration budget before the fallback.
+        Rayleigh iterations before the fallback.
     tol : float
         Convergence threshold on the eigen-residual |C y - lam y|, relative to trace(C).
 
@@ -215,25 +295,36 @@ def smallest_eigvec(c, max_iter, tol):
     tr = 0.0
     for i in range(m):
         tr += c[i, i]
-    shifted = c.copy()
-    shift = 1e-11 * tr / m + 1e-300
-    for i in range(m):
-        shifted[i, i] += shift
-    l, ok = cholesky(shifted, 1e-300)
-    if ok:
-        y = np.ones(m) / np.sqrt(m)
-        # Stop on the eigen-residual, not on the step: with close eigenvalues the steps are
-        # small long before y is an eigenvector.
-        target = tol * tr + 1e-300
+    target = tol * tr + 1e-300
+    y = np.ones(m) / np.sqrt(m)
+    # Unshifted steps until the Rayleigh quotient settles, so that the cubic phase below starts
+    # in the basin of the smallest eigenvalue rather than of the next one.
+    prev = np.inf
+    for _ in range(12):
+        z = solve_shifted(c, 0.0, y)
+        y = z / np.sqrt(np.sum(z * z))
+        lam = np.sum(y * (c @ y))
+        if prev - lam <= 0.02 * lam:
+            break
+        prev = lam
+    if np.all(np.isfinite(y)):
         for _ in range(max_iter):
-            z = solve_upper_t(l, solve_lower(l, y))
-            norm = np.sqrt(np.sum(z * z))
-            if not norm > 0.0:
-                break
-            y = z / norm
             cy = c @ y
             lam = np.sum(y * cy)
-            if np.sqrt(np.sum((cy - lam * y) ** 2)) <= target:
-                return y, lam
+            res = np.sqrt(np.sum((cy - lam * y) ** 2))
+            if res <= target:
+                delta = 1e-10 * tr + 2.0 * res + 1e-300
+                shifted = c.copy()
+                for i in range(m):
+                    shifted[i, i] -= lam - delta
+                _l, smallest = cholesky(shifted, 0.0)
+                if smallest:
+                    return y, lam
+                break
+            z = solve_shifted(c, lam, y)
+            norm = np.sqrt(np.sum(z * z))
+            if not (norm > 0.0 and np.isfinite(norm)):
+                break
+            y = z / norm
     w, v = jacobi_eigh(c)
     return v[:, 0].copy(), w[0]

@@ -138,7 +138,15 @@ def sampson_rms(a, b, c, xs):
     total = 0.0
     m = xs.shape[0]
     for i in range(m):
-        f, g = quadric_value_grad(a, b, c, xs[i])
-        gg = np.sum(g * g)
+        x0, x1, x2 = xs[i, 0], xs[i, 1], xs[i, 2]
+        # A x, written out: this runs once per neighbor and must not allocate.
+        ax0 = a[0, 0] * x0 + a[0, 1] * x1 + a[0, 2] * x2
+        ax1 = a[1, 0] * x0 + a[1, 1] * x1 + a[1, 2] * x2
+        ax2 = a[2, 0] * x0 + a[2, 1] * x1 + a[2, 2] * x2
+        f = x0 * ax0 + x1 * ax1 + x2 * ax2 + b[0] * x0 + b[1] * x1 + b[2] * x2 + c
+        g0 = 2.0 * ax0 + b[0]
+        g1 = 2.0 * ax1 + b[1]
+        g2 = 2.0 * ax2 + b[2]
+        gg = g0 * g0 + g1 * g1 + g2 * g2
         total += f * f / gg if gg > 1e-300 else f * f
     return np.sqrt(total / m)

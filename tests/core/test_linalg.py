@@ -46,3 +46,26 @@ def test_cholesky_reports_indefinite_instead_of_raising():
     l, ok = cholesky(np.array([[4.0, 2.0], [2.0, 3.0]]), 1e-12)
     assert ok
     np.testing.assert_allclose(l @ l.T, [[4.0, 2.0], [2.0, 3.0]])
+
+
+def test_moment_assembly_matches_direct_products():
+    from curvature.fitting.moments import gradient_metric, moments4, scatter_matrix
+
+    xs = np.random.default_rng(3).normal(size=(17, 3))
+    s2 = np.sqrt(2.0)
+
+    def basis(p):
+        x, y, z = p
+        return np.array([x * x, y * y, z * z, s2 * x * y, s2 * y * z, s2 * x * z, x, y, z, 1.0])
+
+    def jac(p):
+        x, y, z = p
+        return np.array([[2 * x, 0, 0], [0, 2 * y, 0], [0, 0, 2 * z], [s2 * y, s2 * x, 0],
+                         [0, s2 * z, s2 * y], [s2 * z, 0, s2 * x], [1, 0, 0], [0, 1, 0],
+                         [0, 0, 1]])
+
+    mom = moments4(xs)
+    np.testing.assert_allclose(scatter_matrix(mom), sum(np.outer(basis(p), basis(p)) for p in xs),
+                               rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(gradient_metric(mom), sum(jac(p) @ jac(p).T for p in xs),
+                               rtol=1e-12, atol=1e-12)
