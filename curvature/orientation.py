@@ -11,9 +11,7 @@ from numba import njit
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
 
-from .neighborhoods.knn import knn_query
-
-# Neighbors per point in the graph the orientation propagates over.
+# Neighbors per point in the graph the orientation propagates over (the nearest ones).
 ORIENT_K = 10
 
 
@@ -39,26 +37,49 @@ def signs_from_viewpoint(points: np.ndarray, est: np.ndarray, viewpoint) -> np.n
     return signs_from_normals(est, to_view)
 
 
-def signs_auto(points: np.ndarray, est: np.ndarray, tree, workers: int = 1,
-               chunk: int = 65536) -> np.ndarray:
+def first_neighbors(nbhd, k: int = None) -> np.ndarray:
+    """The first ``k`` neighbors of each query point of a CSR neighborhood, -1 padded.
+
+    Every method lists neighbors nearest first (or ring by ring), so these make a local graph
+    for orientation without a second neighbor search.
+
+    Parameters
+    ----------
+    nbhd : Neighborhoods
+        m query points.
+    k : int
+        Columns wanted (default ``ORIENT_K``).
+
+    Returns
+    -------
+    ndarray, shape (m, k), int32
+    """
+    k = ORIENT_K if k is None else k
+    sizes = nbhd.sizes()
+    take = np.minimum(sizes, k)
+    out = np.full((len(sizes), k), -1, np.int32)
+    cols = np.arange(k)[None, :]
+    mask = cols < take[:, None]
+    pos = (nbhd.indptr[:-1, None] + cols)[mask]
+    out[mask] = nbhd.indices[pos]
+    return out
+
+
+def signs_auto(points: np.ndarray, est: np.ndarray, graph: np.ndarray) -> np.ndarray:
     """Propagate a consistent orientation over a minimum spanning tree.
 
-    The graph joins each point to its ``ORIENT_K`` nearest neighbors with weight 1 - |ni . nj|,
-    so the tree prefers edges between nearly parallel normals, where a flip is unambiguous. Each
-    connected component is seeded at the point farthest from its centroid, with the normal
-    pointing away from the centroid (outward on closed surfaces).
+    The graph joins each point to its first neighbors with weight 1 - |ni . nj|, so the tree
+    prefers edges between nearly parallel normals, where a flip is unambiguous (Hoppe et al.,
+    SIGGRAPH 1992). Each connected component is seeded at the point farthest from its
+    centroid, with the normal pointing away from the centroid (outward on closed surfaces).
 
     Parameters
     ----------
     points : ndarray, shape (n, 3)
     est : ndarray, shape (n, 3)
         Unit normals of arbitrary sign; NaN rows are left out of the graph.
-    tree : scipy.spatial.cKDTree
-        Tree over ``points``.
-    workers : int
-        Threads for the tree queries.
-    chunk : int
-        Query points per batch, to bound memory.
+    graph : ndarray, shape (n, k), int
+        Neighbor indices per point, -1 for none (see :func:`first_neighbors`).
 
     Returns
     -------
@@ -66,27 +87,19 @@ def signs_auto(points: np.ndarray, est: np.ndarray, tree, workers: int = 1,
     """
     n = points.shape[0]
     valid = np.isfinite(est).all(axis=1)
-    k = min(ORIENT_K, n - 1)
-    rows, cols, weights = [], [], []
-    for start in range(0, n, chunk):
-        idx = np.arange(start, min(start + chunk, n), dtype=np.int64)
-        nbr, _ = knn_query(tree, points, idx, k, workers)
-        src = np.repeat(idx, k)
-        dst = nbr.ravel()
-        ok = valid[src] & valid[dst]
-        src, dst = src[ok], dst[ok]
-        dot = np.abs(np.einsum("ij,ij->i", est[src], est[dst]))
-        # Zero weights would read as missing edges; keep them strictly positive.
-        w = np.maximum(1.0 - dot, 0.0) + 1e-12
-        rows.append(src)
-        cols.append(dst)
-        weights.append(w)
-    graph = coo_matrix((np.concatenate(weights), (np.concatenate(rows), np.concatenate(cols))),
-                       shape=(n, n)).tocsr()
-    # k-NN is not symmetric; the union of both directions makes the graph independent of the
-    # point order (the weights of i->j and j->i are equal, so the maximum is either).
-    graph = graph.maximum(graph.T).tocsr()
-    tree_graph = minimum_spanning_tree(graph)
+    k = graph.shape[1]
+    src = np.repeat(np.arange(n, dtype=np.int64), k)
+    dst = graph.ravel().astype(np.int64)
+    ok = dst >= 0
+    ok[ok] = valid[src[ok]] & valid[dst[ok]] & (src[ok] != dst[ok])
+    src, dst = src[ok], dst[ok]
+    dot = np.abs(np.einsum("ij,ij->i", est[src], est[dst]))
+    # Zero weights would read as missing edges; keep them strictly positive.
+    weights = np.maximum(1.0 - dot, 0.0) + 1e-12
+    # The graph need not be symmetric: the spanning tree treats i->j and j->i as one undirected
+    # edge, and their weights are equal, so the result does not depend on the point order.
+    graph_csr = coo_matrix((weights, (src, dst)), shape=(n, n)).tocsr()
+    tree_graph = minimum_spanning_tree(graph_csr)
     sym = (tree_graph + tree_graph.T).tocsr()
     n_comp, labels = connected_components(sym, directed=False)
     seeds = component_seeds(points, labels, n_comp, valid)

@@ -19,9 +19,15 @@ from .cloud import PointCloud
 from .errors import ParameterError
 from .fitting import FIT_PARAMS, FITS, fit_neighborhoods, resolve_fit
 from .neighborhoods import make_finder
-from .orientation import apply_signs, signs_auto, signs_from_normals, signs_from_viewpoint
+from .orientation import (
+    ORIENT_K,
+    apply_signs,
+    first_neighbors,
+    signs_auto,
+    signs_from_normals,
+    signs_from_viewpoint,
+)
 from .result import CurvatureResult
-from .status import Status
 from .validation import as_faces, as_points, as_vectors
 
 ORIENTATIONS = ("auto", "normals", "viewpoint")
@@ -151,6 +157,8 @@ def estimate(points, method: str = "knn", *, fit: str = "implicit", orientation=
     tree = cKDTree(pts, balanced_tree=False, compact_nodes=False)
     finder = make_finder(pts, method, faces=tri, tree=tree, **method_params)
     res = empty_result(pts, tri)
+    # The first neighbors of each point, kept for the orientation graph (40 bytes a point).
+    graph = np.empty((n, ORIENT_K), np.int32) if mode == "auto" else None
     timings = {"neighbors": 0.0, "fit": 0.0, "orientation": 0.0}
     with numba_threads(nthreads):
         for start in range(0, n, chunk_size):
@@ -168,10 +176,12 @@ def estimate(points, method: str = "knn", *, fit: str = "implicit", orientation=
                 out.k1, out.k2, out.residual, out.status
             res.normals[sl], res.dir1[sl], res.dir2[sl] = out.normals, out.dir1, out.dir2
             res.neighbor_count[sl] = nbhd.sizes()
+            if graph is not None:
+                graph[sl] = first_neighbors(nbhd)
             if progress is not None:
                 progress(stop, n)
         t0 = time.perf_counter()
-        orient(res, mode, ref_normals, vp, tree, nthreads)
+        orient(res, mode, ref_normals, vp, graph)
         timings["orientation"] = time.perf_counter() - t0
     res.mean[:] = 0.5 * (res.k1 + res.k2)
     res.gaussian[:] = res.k1 * res.k2
@@ -195,19 +205,18 @@ def empty_result(pts: np.ndarray, faces) -> CurvatureResult:
         residual=np.empty(n), faces=faces)
 
 
-def orient(res: CurvatureResult, mode: str, ref_normals, viewpoint, tree, workers: int) -> None:
-    """Fix the sign of every fitted normal, flipping curvatures and directions with it."""
+def orient(res: CurvatureResult, mode: str, ref_normals, viewpoint, graph) -> None:
+    """Fix the sign of every fitted normal, flipping curvatures and directions with it.
+
+    ``graph`` (n, ORIENT_K) holds each point's first neighbors for mode "auto".
+    """
     if mode == "normals":
         signs = signs_from_normals(res.normals, ref_normals)
     elif mode == "viewpoint":
         signs = signs_from_viewpoint(res.points, res.normals, viewpoint)
     else:
-        signs = signs_auto(res.points, res.normals, tree, workers)
+        signs = signs_auto(res.points, res.normals, graph)
     apply_signs(signs, res.k1, res.k2, res.normals, res.dir1, res.dir2)
-    # Normals stay where a fit produced one even if curvature failed later; NaN otherwise.
-    bad = res.status != Status.OK
-    res.k1[bad] = np.nan
-    res.k2[bad] = np.nan
 
 
 __all__ = ["FITS", "ORIENTATIONS", "estimate"]
