@@ -18,7 +18,7 @@ venv: $(STAMP)
 run: demo
 demo: $(STAMP)
 	mkdir -p data
-	$(PY) -m curvature.synthetic torus --n 20000 --noise 0.1 --seed 1 -o data/demo_torus.ply
+	$(PY) -m curvature synthetic torus --n 20000 --noise 0.1 --seed 1 -o data/demo_torus.ply
 	$(PY) -m curvature estimate data/demo_torus.ply -o data/demo_torus_curvature.ply
 
 test: $(STAMP)

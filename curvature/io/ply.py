@@ -1,0 +1,156 @@
+"""PLY (Stanford polygon file): read ascii / binary little / big endian, write ascii / binary.
+
+Read: any vertex property order and type, normals ``nx ny nz``, faces from
+``vertex_indices`` or ``vertex_index`` lists (fan-triangulated); other elements are skipped.
+Write: ``x y z``, ``nx ny nz``, then result or extra fields, then faces as
+``property list uchar int vertex_indices``; CloudCompare and MeshLab read these files and
+show every extra property as a scalar field.
+"""
+
+from __future__ import annotations
+
+from typing import BinaryIO
+
+import numpy as np
+
+from ..cloud import PointCloud
+from ..errors import FormatError
+from .checks import finish_cloud
+from .columns import Table
+from .faces import triangulate
+from .ply_ascii import read_ascii_elements
+from .ply_binary import read_binary_elements
+from .ply_header import parse_header
+from .tokens import number_texts
+
+NORMAL_NAMES = (("nx", "ny", "nz"), ("normal_x", "normal_y", "normal_z"))
+FACE_LISTS = ("vertex_indices", "vertex_index")
+_CHUNK_ROWS = 65536
+
+
+def read_ply(data: bytes, source=None) -> PointCloud:
+    """Decode a PLY file.
+
+    Parameters
+    ----------
+    data : bytes
+        The whole file.
+    source : str, optional
+        File name for messages.
+
+    Returns
+    -------
+    PointCloud
+        ``points`` (n, 3) float64 from ``x y z``; ``normals`` (n, 3) when ``nx ny nz`` (or
+        ``normal_x ...``) exist; ``faces`` (m, 3) int64; other scalar vertex properties in
+        ``properties`` with their declared type.
+
+    Raises
+    ------
+    FormatError
+        Any malformation, naming the line (ascii) or byte offset (binary).
+    """
+    header = parse_header(data, source)
+    if header.element("vertex").count == 0:
+        raise FormatError(source, "the file holds no points (element vertex 0)",
+                          line=header.element("vertex").line)
+    wanted = {"vertex", "face"}
+    if header.format == "ascii":
+        elements = read_ascii_elements(data, header, source, wanted)
+    else:
+        elements = read_binary_elements(data, header, source, wanted)
+    vertex = elements["vertex"]
+    cols = vertex.scalars
+    points = np.stack([cols["x"], cols["y"], cols["z"]], axis=1).astype(np.float64)
+    used = {"x", "y", "z"}
+    normals = None
+    for names in NORMAL_NAMES:
+        if all(n in cols for n in names):
+            normals = np.stack([cols[n] for n in names], axis=1).astype(np.float64)
+            used.update(names)
+            break
+    properties = {k: v for k, v in cols.items() if k not in used}
+    cloud = finish_cloud(source, points, normals=normals, properties=properties,
+                         where=vertex.where, label="vertex")
+    face = elements.get("face")
+    if face is not None:
+        name = next((n for n in FACE_LISTS if n in face.lists), None)
+        if name is None and header.element("face").count:
+            raise FormatError(source, "the face element has no 'vertex_indices' (or "
+                                      "'vertex_index') list property",
+                              line=header.element("face").line)
+        if name is not None:
+            counts, items = face.lists[name]
+            if items.dtype.kind not in "iu":
+                items = items.astype(np.int64)
+            cloud.faces = triangulate(source, counts, items, len(cloud), where=face.where)
+    return cloud
+
+
+def _ply_column(arr: np.ndarray) -> tuple[str, np.ndarray]:
+    """PLY type name and the array converted to it (PLY has no 64-bit integers)."""
+    kind, size = arr.dtype.kind, arr.dtype.itemsize
+    if kind == "b":
+        return "uchar", arr.astype(np.uint8)
+    if kind == "f":
+        return ("float", arr.astype(np.float32)) if size <= 4 else ("double",
+                                                                    arr.astype(np.float64))
+    if kind == "i" and size <= 4:
+        return {1: "char", 2: "short", 4: "int"}[size], arr
+    if kind == "u" and size <= 4:
+        return {1: "uchar", 2: "ushort", 4: "uint"}[size], arr
+    info = np.iinfo(np.int32)
+    if arr.size == 0 or (arr.min() >= info.min and arr.max() <= info.max):
+        return "int", arr.astype(np.int32)
+    return "double", arr.astype(np.float64)
+
+
+def write_ply(fh: BinaryIO, table: Table, *, binary: bool = True) -> None:
+    """Write ``table`` as PLY (binary little endian, or ascii when ``binary=False``)."""
+    columns = [(name, *_ply_column(np.asarray(arr))) for name, arr in table.columns()]
+    faces = table.faces
+    if faces is not None and faces.max(initial=0) > np.iinfo(np.int32).max:
+        raise FormatError(None, "face indices do not fit PLY 'int'")
+    fmt = "binary_little_endian" if binary else "ascii"
+    head = ["ply", f"format {fmt} 1.0", "comment written by curvature"]
+    for key, value in table.info.items():
+        if isinstance(value, str | int | float | bool) and "\n" not in str(value):
+            head.append(f"comment {key} {value}")
+    head.append(f"element vertex {table.n}")
+    head += [f"property {ptype} {name}" for name, ptype, _ in columns]
+    if faces is not None:
+        head += [f"element face {len(faces)}", "property list uchar int vertex_indices"]
+    head.append("end_header")
+    fh.write(("\n".join(head) + "\n").encode("ascii"))
+    if binary:
+        _write_binary_body(fh, table.n, columns, faces)
+    else:
+        _write_ascii_body(fh, table.n, columns, faces)
+
+
+def _write_binary_body(fh, n, columns, faces):
+    dt = np.dtype([(f"p{i}", arr.dtype.newbyteorder("<")) for i, (_, _, arr)
+                   in enumerate(columns)])
+    for lo in range(0, n, _CHUNK_ROWS):
+        hi = min(n, lo + _CHUNK_ROWS)
+        rec = np.empty(hi - lo, dtype=dt)
+        for i, (_, _, arr) in enumerate(columns):
+            rec[f"p{i}"] = arr[lo:hi]
+        fh.write(rec.tobytes())
+    if faces is not None:
+        rec = np.empty(len(faces), dtype=[("n", "u1"), ("v", "<i4", (3,))])
+        rec["n"] = 3
+        rec["v"] = faces
+        fh.write(rec.tobytes())
+
+
+def _write_ascii_body(fh, n, columns, faces):
+    for lo in range(0, n, _CHUNK_ROWS):
+        hi = min(n, lo + _CHUNK_ROWS)
+        texts = [number_texts(arr[lo:hi]) for _, _, arr in columns]
+        fh.write(("\n".join(map(" ".join, zip(*texts, strict=True))) + "\n").encode("ascii"))
+    if faces is not None:
+        for lo in range(0, len(faces), _CHUNK_ROWS):
+            part = faces[lo:lo + _CHUNK_ROWS].tolist()
+            lines = [f"3 {a} {b} {c}" for a, b, c in part]
+            fh.write(("\n".join(lines) + "\n").encode("ascii"))
