@@ -14,8 +14,11 @@ $(STAMP): pyproject.toml
 
 venv: $(STAMP)
 
-# Main job: until the service exists, the CLI on a synthetic cloud it generates.
-run: demo
+# Main job: the service on 127.0.0.1:8000 (CURVATURE_HOST/PORT/DATA_DIR honoured).
+run: $(STAMP)
+	$(PY) -m service
+
+# The CLI on a synthetic cloud it generates.
 demo: $(STAMP)
 	mkdir -p data
 	$(PY) -m curvature synthetic torus --n 20000 --noise 0.1 --seed 1 -o data/demo_torus.ply

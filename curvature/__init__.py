@@ -11,6 +11,7 @@ Public surface (DESIGN.md section 5)::
 from . import synthetic
 from .cloud import PointCloud
 from .errors import CurvatureInputError, FormatError, ParameterError, UnknownFormatError
+from .fitting import FIT_PARAMS
 from .io import read, write
 from .neighborhoods import FINDERS, Neighborhoods, neighbors
 from .params import ParamSpec
@@ -23,6 +24,7 @@ __version__ = "0.1.0"
 __all__ = [
     "FINDERS",
     "FITS",
+    "FIT_PARAMS",
     "ORIENTATIONS",
     "CurvatureInputError",
     "CurvatureResult",

@@ -1,10 +1,11 @@
-"""Command line: ``curvature estimate|info|neighbors``."""
+"""Command line: ``curvature estimate|info|neighbors|bench``."""
 
 from __future__ import annotations
 
 import argparse
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -84,6 +85,19 @@ def build_parser() -> argparse.ArgumentParser:
     nb.add_argument("input")
     nb.add_argument("--index", type=int, required=True, help="the query point's index")
     add_method_options(nb)
+
+    bench = sub.add_parser("bench", help="regenerate a benchmark study (CSV and PNG plots)")
+    bench.add_argument("study", choices=["paper"],
+                       help="paper: the accuracy study of Khameneifar & Feng (2019)")
+    bench.add_argument("--out", required=True, help="output folder")
+    bench.add_argument("--quick", action="store_true", help="reduced grid (about a minute)")
+    bench.add_argument("--seeds", type=int, default=None,
+                       help="seeds per configuration (default: 3, quick: 2)")
+    bench.add_argument("--workers", type=int, default=None,
+                       help="threads of each estimate (default: all cores)")
+    bench.add_argument("--data", default=None,
+                       help="folder holding bun000.ply (default: ../shared/data next to the "
+                            "repository)")
     return parser
 
 
@@ -173,6 +187,25 @@ def cmd_neighbors(args) -> int:
     return 0
 
 
+def cmd_bench(args) -> int:
+    from . import paper_study
+
+    if args.seeds is not None and args.seeds < 1:
+        raise CurvatureInputError(f"--seeds must be >= 1, got {args.seeds}")
+    data = Path(args.data) if args.data else paper_study.default_data_dir()
+    scan = data / paper_study.SCAN_NAME
+    if not scan.is_file():
+        raise CurvatureInputError(f"{scan} not found; point --data at the folder holding "
+                                  f"{paper_study.SCAN_NAME}")
+    changes = {"scan": str(scan), "workers": args.workers}
+    if args.seeds is not None:
+        changes["seeds"] = tuple(range(1, args.seeds + 1))
+    config = (paper_study.StudyConfig.quick if args.quick
+              else paper_study.StudyConfig.full)(**changes)
+    paper_study.run_study(config, args.out)
+    return 0
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["synthetic"]:  # its own parser lives with the shapes
@@ -181,7 +214,8 @@ def main(argv=None) -> int:
         return synthetic.main(argv[1:])
     parser = build_parser()
     args = parser.parse_args(argv)
-    commands = {"estimate": cmd_estimate, "info": cmd_info, "neighbors": cmd_neighbors}
+    commands = {"estimate": cmd_estimate, "info": cmd_info, "neighbors": cmd_neighbors,
+                "bench": cmd_bench}
     try:
         return commands[args.command](args)
     except (ValueError, OSError) as exc:  # CurvatureInputError and friends are ValueErrors

@@ -1,0 +1,135 @@
+"""The FastAPI application: wiring, lifespan (store, pool, cleanup) and the OpenAPI document."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+from contextlib import asynccontextmanager, suppress
+
+import anyio.to_thread
+from fastapi import FastAPI
+from fastapi.openapi.utils import get_openapi
+
+import curvature
+
+from . import problems
+from .cleanup import cleanup_loop
+from .executor import create_executor
+from .metrics import RequestMetricsMiddleware, ServiceMetrics
+from .problem_types import PROBLEM_TYPES, ProblemError
+from .problems import PROBLEM_MEDIA_TYPE
+from .routes import curvature as curvature_routes
+from .routes import health, jobs, methods
+from .routes import problems as problem_routes
+from .schemas import CloudRequest, MultipartCloudRequest, Problem
+from .settings import Settings
+from .store import JobStore
+
+log = logging.getLogger("service")
+
+DESCRIPTION = """\
+Per-point principal curvatures (k1 >= k2), mean and Gaussian curvature, normals and principal
+directions of 3D point clouds and meshes, by local quadric fitting over a choice of
+neighborhoods.
+
+Submit a cloud as a job (`POST /v1/jobs`), poll it (`GET /v1/jobs/{id}`) and download the result
+(`GET /v1/jobs/{id}/result`) as JSON, binary PLY, CSV or NPZ; small clouds can be answered right
+away (`POST /v1/curvature`). Errors are `application/problem+json` documents whose `type` is
+stable and documented under `/problems/{slug}`.
+"""
+
+INTERRUPTED = ProblemError(
+    "worker-crashed", "the service stopped while this job ran, too many times").to_dict()
+
+
+@asynccontextmanager
+async def lifespan(app: FastAPI):
+    """Open the store, re-queue interrupted jobs, start the pool and the cleanup task."""
+    settings: Settings = app.state.settings
+    for folder in (settings.data_dir, settings.jobs_dir, settings.tmp_dir):
+        folder.mkdir(parents=True, exist_ok=True)
+    store = JobStore(settings.db_path)
+    await anyio.to_thread.run_sync(store.initialize)
+    requeued, failed = await anyio.to_thread.run_sync(
+        store.requeue_interrupted, settings.max_attempts, INTERRUPTED)
+    if requeued or failed:
+        log.warning("recovered interrupted jobs: %d re-queued, %d failed", requeued, failed)
+    executor = create_executor(settings, store, app.state.metrics)
+    await executor.start()
+    app.state.store = store
+    app.state.executor = executor
+    cleanup = asyncio.create_task(cleanup_loop(settings, store))
+    log.info("curvature service ready on data dir %s with %d worker(s) (%s)",
+             settings.data_dir.resolve(), settings.workers, settings.start_method)
+    try:
+        yield
+    finally:
+        cleanup.cancel()
+        with suppress(asyncio.CancelledError):
+            await cleanup
+        await executor.stop()
+        app.state.executor = None
+
+
+def build_openapi(app: FastAPI) -> dict:
+    """The app's OpenAPI document, with the request and problem schemas the hand-parsed
+    endpoints refer to."""
+    if app.openapi_schema is not None:
+        return app.openapi_schema
+    spec = get_openapi(title=app.title, version=app.version, description=app.description,
+                       routes=app.routes, tags=app.openapi_tags)
+    schemas = spec.setdefault("components", {}).setdefault("schemas", {})
+    for model in (CloudRequest, MultipartCloudRequest, Problem):
+        schema = model.model_json_schema(ref_template="#/components/schemas/{model}")
+        schemas.update(schema.pop("$defs", {}))
+        schemas[model.__name__] = schema
+    _document_validation_problems(spec)
+    app.openapi_schema = spec
+    return spec
+
+
+def _document_validation_problems(spec: dict) -> None:
+    """FastAPI documents its own 422 body for every route with parameters; ours is a problem."""
+    problem_422 = {"description": f"{PROBLEM_TYPES['invalid-request'].uri}: "
+                                  f"{PROBLEM_TYPES['invalid-request'].title}",
+                   "content": {PROBLEM_MEDIA_TYPE: {
+                       "schema": {"$ref": "#/components/schemas/Problem"}}}}
+    for operations in spec.get("paths", {}).values():
+        for operation in operations.values():
+            response = operation.get("responses", {}).get("422")
+            if response and "application/json" in response.get("content", {}):
+                operation["responses"]["422"] = problem_422
+    for name in ("HTTPValidationError", "ValidationError"):
+        spec["components"]["schemas"].pop(name, None)
+
+
+def create_app(settings: Settings | None = None) -> FastAPI:
+    """Build the app; nothing touches the disk or starts processes until its lifespan runs.
+
+    Parameters
+    ----------
+    settings : Settings, optional
+        Defaults to the ``CURVATURE_*`` environment.
+    """
+    app = FastAPI(
+        title="Curvature service", version=curvature.__version__, description=DESCRIPTION,
+        lifespan=lifespan,
+        openapi_tags=[
+            {"name": "jobs", "description": "Asynchronous curvature jobs."},
+            {"name": "curvature", "description": "Synchronous answers for small clouds."},
+            {"name": "methods", "description": "Methods, fit models and parameters."},
+            {"name": "operations", "description": "Health, readiness and metrics."},
+            {"name": "problems", "description": "Documentation of the error types."},
+        ],
+    )
+    app.state.settings = settings if settings is not None else Settings()
+    app.state.metrics = ServiceMetrics()
+    app.state.store = None
+    app.state.executor = None
+    problems.install(app)
+    # Added last = outermost: it also counts the 500s the catch-all produces.
+    app.add_middleware(RequestMetricsMiddleware, metrics=app.state.metrics)
+    for module in (jobs, curvature_routes, methods, health, problem_routes):
+        app.include_router(module.router)
+    app.openapi = lambda: build_openapi(app)
+    return app

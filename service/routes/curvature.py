@@ -1,0 +1,73 @@
+"""Synchronous curvature of small clouds."""
+
+from __future__ import annotations
+
+import shutil
+import uuid
+from typing import Annotated
+
+from fastapi import APIRouter, Depends, Query, Request
+from fastapi.responses import FileResponse
+from starlette.background import BackgroundTask
+
+from ..dependencies import get_executor, get_metrics, get_settings
+from ..executor import LocalPoolExecutor
+from ..formats import RESULT_MEDIA_TYPES
+from ..metrics import ServiceMetrics
+from ..problems import HTTPProblem, problem_responses
+from ..results import content_disposition, media_type, negotiate
+from ..settings import Settings
+from ..uploads import receive_cloud
+from .jobs import CLOUD_BODY, RESULT_CONTENT, ResultFormat
+
+router = APIRouter(prefix="/v1", tags=["curvature"])
+
+
+@router.post(
+    "/curvature", summary="Curvature of a small cloud, answered right away",
+    response_class=FileResponse, openapi_extra=CLOUD_BODY,
+    responses={200: {"description": "The result in the negotiated format ("
+                     + ", ".join(f"{f}: {m}" for f, m in RESULT_MEDIA_TYPES.items()) + ")",
+                     "content": RESULT_CONTENT},
+               **problem_responses("malformed-request", "invalid-request", "invalid-parameters",
+                                   "malformed-file", "non-finite-coordinates", "too-few-points",
+                                   "too-large", "too-many-points", "unknown-format",
+                                   "not-acceptable", "queue-full")},
+)
+async def curvature_now(
+    request: Request,
+    settings: Annotated[Settings, Depends(get_settings)],
+    executor: Annotated[LocalPoolExecutor, Depends(get_executor)],
+    metrics: Annotated[ServiceMetrics, Depends(get_metrics)],
+    format: Annotated[ResultFormat | None, Query(
+        description="Result format; wins over the Accept header.")] = None,
+) -> FileResponse:
+    """Same input as ``POST /v1/jobs``; the answer is the result itself (JSON by default, or
+    as negotiated like a job result). Clouds above the synchronous point limit get 413
+    ``too-many-points``: submit those as jobs. The computation runs in the worker pool."""
+    fmt = negotiate(format, request.headers.get("accept"))
+    if executor.sync_waiting >= settings.max_pending_sync:
+        raise HTTPProblem(
+            "queue-full", f"{executor.sync_waiting} synchronous requests are already waiting",
+            headers={"Retry-After": str(settings.retry_after_seconds)})
+    folder = settings.tmp_dir / uuid.uuid4().hex
+    folder.mkdir(parents=True)
+    try:
+        received = await receive_cloud(request, folder, settings)
+        if received.n_points is not None and received.n_points > settings.sync_max_points:
+            raise HTTPProblem("too-many-points", (
+                f"the cloud has {received.n_points} points; synchronous answers are limited "
+                f"to {settings.sync_max_points}; submit it to POST /v1/jobs"))
+        path = await executor.run_sync(
+            str(folder / received.input_file), received.kind, received.filename,
+            received.params, fmt, str(folder), settings.sync_max_points,
+            settings.estimate_workers)
+    except BaseException:
+        shutil.rmtree(folder, ignore_errors=True)
+        raise
+    metrics.sync_requests.inc(format=fmt)
+    metrics.upload_bytes.inc(received.size)
+    return FileResponse(path, media_type=media_type(fmt),
+                        headers={"Content-Disposition": content_disposition("curvature", fmt),
+                                 "Vary": "Accept"},
+                        background=BackgroundTask(shutil.rmtree, folder, ignore_errors=True))

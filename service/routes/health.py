@@ -1,0 +1,63 @@
+"""Probes and metrics for operators."""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+import anyio.to_thread
+from fastapi import APIRouter, Depends, Request
+from fastapi.responses import PlainTextResponse
+from pydantic import BaseModel
+
+from .. import metrics as metrics_module
+from ..dependencies import get_metrics
+from ..metrics import ServiceMetrics
+from ..problems import HTTPProblem, problem_responses
+
+router = APIRouter(tags=["operations"])
+
+
+class Health(BaseModel):
+    status: str
+
+
+class Readiness(BaseModel):
+    status: str
+    checks: dict[str, bool]
+
+
+def _checks(request: Request) -> dict[str, bool]:
+    store = getattr(request.app.state, "store", None)
+    executor = getattr(request.app.state, "executor", None)
+    return {"store": store is not None and store.ping(),
+            "pool": executor is not None and executor.ready}
+
+
+@router.get("/healthz", response_model=Health, summary="Liveness: the process answers")
+def healthz() -> Health:
+    return Health(status="ok")
+
+
+@router.get("/readyz", response_model=Readiness, responses=problem_responses("not-ready"),
+            summary="Readiness: job store open, worker pool started and warmed up")
+async def readyz(request: Request) -> Readiness:
+    checks = await anyio.to_thread.run_sync(_checks, request)
+    if not all(checks.values()):
+        failing = ", ".join(k for k, ok in checks.items() if not ok)
+        raise HTTPProblem("not-ready", f"not ready: {failing}", checks=checks)
+    return Readiness(status="ready", checks=checks)
+
+
+@router.get("/metrics", response_class=PlainTextResponse,
+            summary="Prometheus metrics (text exposition format 0.0.4)",
+            responses={200: {"content": {"text/plain": {"schema": {"type": "string"}}}}})
+async def metrics(request: Request,
+                  registry: Annotated[ServiceMetrics, Depends(get_metrics)]) -> PlainTextResponse:
+    checks = await anyio.to_thread.run_sync(_checks, request)
+    store = getattr(request.app.state, "store", None)
+    if store is not None and checks["store"]:
+        counts = await anyio.to_thread.run_sync(store.count_by_status)
+        for status, count in counts.items():
+            registry.jobs.set(count, status=status)
+    registry.ready.set(1 if all(checks.values()) else 0)
+    return PlainTextResponse(registry.render(), media_type=metrics_module.CONTENT_TYPE)

@@ -1,0 +1,204 @@
+"""Asynchronous jobs: submit, inspect, list, download the result, cancel or delete."""
+
+from __future__ import annotations
+
+import shutil
+from typing import Annotated, Literal
+
+import anyio.to_thread
+from fastapi import APIRouter, Depends, Query, Request, Response
+from fastapi.responses import FileResponse
+
+from ..cleanup import remove_job_files
+from ..dependencies import client_id, get_executor, get_metrics, get_settings, get_store
+from ..executor import LocalPoolExecutor
+from ..formats import RESULT_FORMATS, RESULT_MEDIA_TYPES
+from ..metrics import ServiceMetrics
+from ..problems import HTTPProblem, problem_responses
+from ..results import content_disposition, media_type, negotiate
+from ..schemas import Job, JobError, JobInput, JobPage, JobResult, timestamp
+from ..settings import Settings
+from ..store import CANCELLED, FAILED, QUEUED, RUNNING, STATUSES, SUCCEEDED, JobStore, new_job_id
+from ..store import Job as JobRecord
+from ..uploads import receive_cloud
+
+router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
+
+CLOUD_BODY = {"requestBody": {"required": True, "content": {
+    "multipart/form-data": {"schema": {"$ref": "#/components/schemas/MultipartCloudRequest"}},
+    "application/json": {"schema": {"$ref": "#/components/schemas/CloudRequest"}},
+}}}
+RESULT_CONTENT = {RESULT_MEDIA_TYPES[f].split(";")[0]: {"schema": {
+    "type": "string", "format": "binary"}} for f in RESULT_FORMATS}
+
+ResultFormat = Literal[RESULT_FORMATS]
+
+
+def job_view(job: JobRecord) -> Job:
+    """The API form of a stored job."""
+    base = f"/v1/jobs/{job.id}"
+    links = {"self": base}
+    result = None
+    if job.status == SUCCEEDED:
+        links["result"] = f"{base}/result"
+        summary = job.summary or {}
+        result = JobResult(formats=list(RESULT_FORMATS),
+                           status_counts=summary.get("status_counts", {}),
+                           dropped_points=summary.get("dropped_points", 0),
+                           compute_seconds=summary.get("compute_seconds"))
+    return Job(
+        id=job.id, status=job.status, progress=min(max(job.progress, 0.0), 1.0),
+        method=job.params.get("method", ""), params=job.params,
+        input=JobInput(kind=job.input_kind, filename=job.input_name, format=job.input_format,
+                       bytes=job.input_bytes),
+        n_points=job.n_points, attempts=job.attempts, created_at=timestamp(job.created_at),
+        started_at=timestamp(job.started_at), finished_at=timestamp(job.finished_at),
+        expires_at=timestamp(job.expires_at),
+        error=JobError(**job.error) if job.error else None, result=result, links=links)
+
+
+async def _load(store: JobStore, job_id: str) -> JobRecord:
+    job = await anyio.to_thread.run_sync(store.get, job_id)
+    if job is None:
+        raise HTTPProblem("job-not-found", f"no job with id {job_id!r}", job_id=job_id)
+    return job
+
+
+@router.post(
+    "", status_code=202, response_model=Job, openapi_extra=CLOUD_BODY,
+    summary="Submit a cloud for curvature estimation",
+    responses={202: {"description": "Accepted and queued; Location gives the job's URL."},
+               **problem_responses("malformed-request", "invalid-request", "invalid-parameters",
+                                "non-finite-coordinates", "too-large", "unknown-format",
+                                "queue-full")},
+)
+async def submit_job(
+    request: Request, response: Response, owner: Annotated[str, Depends(client_id)],
+    settings: Annotated[Settings, Depends(get_settings)],
+    store: Annotated[JobStore, Depends(get_store)],
+    executor: Annotated[LocalPoolExecutor, Depends(get_executor)],
+    metrics: Annotated[ServiceMetrics, Depends(get_metrics)],
+) -> Job:
+    """Upload a file (multipart: ``file`` + optional ``params`` JSON) or send JSON arrays.
+
+    The input and a ``queued`` job are stored before anything runs; the answer is 202 with
+    ``Location: /v1/jobs/{id}``. Problems in the file itself (malformed, too few points) show
+    up as a ``failed`` job with an ``error`` once a worker has read it.
+    """
+    unfinished = await anyio.to_thread.run_sync(store.count_unfinished)
+    if unfinished >= settings.max_queued_jobs:
+        raise HTTPProblem("queue-full", f"{unfinished} jobs are queued or running; the limit "
+                          f"is {settings.max_queued_jobs}",
+                          headers={"Retry-After": str(settings.retry_after_seconds)})
+    job_id = new_job_id()
+    folder = settings.jobs_dir / job_id
+    folder.mkdir(parents=True)
+    try:
+        received = await receive_cloud(request, folder, settings)
+        job = await anyio.to_thread.run_sync(lambda: store.insert(
+            job_id=job_id, owner=owner, params=received.params, input_kind=received.kind,
+            input_file=received.input_file, input_name=received.filename,
+            input_format=received.format, input_bytes=received.size,
+            n_points=received.n_points))
+    except BaseException:
+        shutil.rmtree(folder, ignore_errors=True)
+        raise
+    metrics.jobs_submitted.inc(input=received.kind)
+    metrics.upload_bytes.inc(received.size)
+    executor.wake()
+    response.headers["Location"] = f"/v1/jobs/{job.id}"
+    return job_view(job)
+
+
+@router.get("", response_model=JobPage, summary="List the caller's jobs, newest first",
+            responses=problem_responses("invalid-request"))
+def list_jobs(
+    response: Response, owner: Annotated[str, Depends(client_id)],
+    store: Annotated[JobStore, Depends(get_store)],
+    limit: Annotated[int, Query(ge=1, le=200, description="Page size.")] = 20,
+    cursor: Annotated[str | None, Query(pattern=r"^[0-9]+$",
+                                        description="next_cursor of the previous page.")] = None,
+    status: Annotated[Literal[STATUSES] | None, Query(description="Only this status.")] = None,
+) -> JobPage:
+    """Jobs submitted with the same ``X-Client-Id`` (or without one), keyset-paginated."""
+    before = int(cursor) if cursor else None
+    rows = store.list_jobs(owner, limit=limit + 1, before_seq=before, status=status)
+    page, more = rows[:limit], len(rows) > limit
+    next_cursor = str(page[-1].seq) if more and page else None
+    if next_cursor:
+        query = f"limit={limit}&cursor={next_cursor}" + (f"&status={status}" if status else "")
+        response.headers["Link"] = f'</v1/jobs?{query}>; rel="next"'
+    return JobPage(items=[job_view(j) for j in page], next_cursor=next_cursor)
+
+
+@router.get("/{job_id}", response_model=Job, summary="Status, progress and error of a job",
+            responses=problem_responses("job-not-found"))
+async def get_job(job_id: str, store: Annotated[JobStore, Depends(get_store)]) -> Job:
+    return job_view(await _load(store, job_id))
+
+
+@router.get(
+    "/{job_id}/result", summary="Download a finished job's result",
+    response_class=FileResponse,
+    responses={200: {"description": "The result in the negotiated format: "
+                     + ", ".join(f"{f} as {RESULT_MEDIA_TYPES[f]}" for f in RESULT_FORMATS),
+                     "content": RESULT_CONTENT},
+               **problem_responses("job-not-found", "result-not-ready", "job-failed",
+                                   "not-acceptable", "invalid-request")},
+)
+async def get_result(
+    job_id: str, request: Request,
+    settings: Annotated[Settings, Depends(get_settings)],
+    store: Annotated[JobStore, Depends(get_store)],
+    executor: Annotated[LocalPoolExecutor, Depends(get_executor)],
+    format: Annotated[ResultFormat | None, Query(
+        description="Result format; wins over the Accept header.")] = None,
+) -> FileResponse:
+    """The format comes from ``?format=``, else from Accept (``application/json``,
+    ``application/x-ply`` / ``model/ply`` / ``application/octet-stream``, ``text/csv``,
+    ``application/x-npz``), else JSON. JSON is columnar with NaN as null; PLY is binary with
+    the input faces; 409 while the job is queued or running."""
+    fmt = negotiate(format, request.headers.get("accept"))
+    job = await _load(store, job_id)
+    if job.status in (QUEUED, RUNNING):
+        raise HTTPProblem("result-not-ready", f"job {job_id} is {job.status} "
+                          f"({job.progress:.0%} done); retry later",
+                          headers={"Retry-After": "1"}, job_id=job_id, job_status=job.status)
+    if job.status == FAILED:
+        detail = (job.error or {}).get("detail", "the job failed")
+        raise HTTPProblem("job-failed", f"job {job_id} failed: {detail}", job_id=job_id)
+    if job.status == CANCELLED:
+        raise HTTPProblem("job-cancelled", f"job {job_id} was cancelled", job_id=job_id)
+    try:
+        path = await executor.render(settings.jobs_dir / job_id, fmt)
+    except FileNotFoundError:  # deleted or expired while we looked
+        raise HTTPProblem("job-not-found", f"no job with id {job_id!r}", job_id=job_id) \
+            from None
+    return FileResponse(path, media_type=media_type(fmt), headers={
+        "Content-Disposition": content_disposition(job_id, fmt), "Vary": "Accept"})
+
+
+@router.delete(
+    "/{job_id}", response_model=Job, summary="Cancel a job, or delete a finished one",
+    responses={204: {"description": "The finished job and its files were deleted."},
+               **problem_responses("job-not-found")},
+)
+async def delete_job(
+    job_id: str, settings: Annotated[Settings, Depends(get_settings)],
+    store: Annotated[JobStore, Depends(get_store)],
+    executor: Annotated[LocalPoolExecutor, Depends(get_executor)],
+) -> Job | Response:
+    """A queued or running job is cancelled (200 with the job, status ``cancelled``; a running
+    computation stops at its next progress report). A finished job is deleted with its files
+    (204)."""
+    job = await _load(store, job_id)
+    if not job.is_final:
+        cancelled = await anyio.to_thread.run_sync(store.cancel, job_id,
+                                                   settings.result_ttl_seconds)
+        if cancelled is not None:
+            executor.cancel(job_id)
+            return job_view(cancelled)
+        job = await _load(store, job_id)  # it finished meanwhile: delete it below
+    await anyio.to_thread.run_sync(store.delete, job_id)
+    await anyio.to_thread.run_sync(remove_job_files, settings, job_id)
+    return Response(status_code=204)

@@ -1,0 +1,263 @@
+"""Request and response models; the per-method parameter models are built from the core.
+
+Each neighborhood method of ``curvature.FINDERS`` gets a model whose fields, defaults and
+bounds come from the method's ``ParamSpec`` tuple at import time, plus the fields every method
+shares (fit model, solver, orientation, viewpoint). The models form a union discriminated by
+``method``, so a new method in the core appears in the API and in OpenAPI by itself.
+"""
+
+from __future__ import annotations
+
+import math
+from datetime import UTC, datetime
+from typing import Annotated, Any, Literal, Union
+
+from pydantic import BaseModel, ConfigDict, Field, create_model, field_validator, model_validator
+
+import curvature
+from curvature import ParamSpec
+
+from .formats import INPUT_EXTENSIONS, RESULT_FORMATS
+from .store import STATUSES
+
+DEFAULT_METHOD = "knn"
+
+FIT_PARAMS: tuple[ParamSpec, ...] = tuple(curvature.FIT_PARAMS)
+# Parameters that only make sense for one fit model.
+FIT_ONLY = {"solver": "implicit"}
+
+
+def _annotation(spec: ParamSpec) -> Any:
+    if spec.choices:
+        return Literal[tuple(spec.choices)]
+    return spec.kind
+
+
+def _field(spec: ParamSpec, default: Any) -> Any:
+    bounds = {}
+    if spec.kind in (int, float):
+        if spec.minimum is not None:
+            bounds["ge"] = spec.minimum
+        if spec.maximum is not None:
+            bounds["le"] = spec.maximum
+    return Field(default, description=spec.help or None, **bounds)
+
+
+class CommonParams(BaseModel):
+    """Fields every method shares: fit model, orientation and viewpoint."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    fit: Literal[tuple(curvature.FITS)] = Field(
+        "implicit", description="Quadric model fitted to each neighborhood.")
+    orientation: Literal[tuple(curvature.ORIENTATIONS)] | None = Field(
+        None, description="How normals are oriented (signs of k1, k2, H). Default: 'normals' "
+        "when the input has normals, 'viewpoint' when a viewpoint is given, else 'auto'.")
+    viewpoint: tuple[float, float, float] | None = Field(
+        None, description="Scanner position [x, y, z]; normals are turned to face it.")
+
+    @field_validator("viewpoint")
+    @classmethod
+    def _finite_viewpoint(cls, value):
+        if value is not None and not all(math.isfinite(v) for v in value):
+            raise ValueError("viewpoint coordinates must be finite")
+        return value
+
+    @model_validator(mode="after")
+    def _consistent(self):
+        for name, only_fit in FIT_ONLY.items():
+            if getattr(self, name, None) is not None and self.fit != only_fit:
+                raise ValueError(f"'{name}' applies to fit '{only_fit}' only")
+        if self.orientation == "viewpoint" and self.viewpoint is None:
+            raise ValueError("orientation 'viewpoint' needs a 'viewpoint'")
+        return self
+
+
+def _fit_fields() -> dict[str, Any]:
+    # Fit-only parameters default to None ("the library's default") so the consistency
+    # check above can tell an explicit value from an absent one.
+    fields = {}
+    for spec in FIT_PARAMS:
+        default = None if spec.name in FIT_ONLY else spec.default
+        annotation = _annotation(spec) | None if default is None else _annotation(spec)
+        fields[spec.name] = (annotation, _field(spec, default))
+    return fields
+
+
+def _method_model(name: str, finder: type) -> type[BaseModel]:
+    fields: dict[str, Any] = {"method": (Literal[name], Field(description="Neighborhood method."))}
+    fields.update(_fit_fields())
+    for spec in finder.PARAMS:
+        fields[spec.name] = (_annotation(spec), _field(spec, spec.default))
+    doc = (finder.__doc__ or "").strip().splitlines()
+    model = create_model(f"{name.capitalize()}Params", __base__=CommonParams,
+                         __doc__=f"Parameters of method '{name}'. {doc[0] if doc else ''}".strip(),
+                         **fields)
+    return model
+
+
+METHOD_MODELS: dict[str, type[BaseModel]] = {
+    name: _method_model(name, finder) for name, finder in sorted(curvature.FINDERS.items())}
+
+if len(METHOD_MODELS) > 1:
+    MethodParams = Annotated[Union[tuple(METHOD_MODELS.values())],  # noqa: UP007
+                             Field(discriminator="method")]
+else:  # a one-member union cannot carry a discriminator
+    MethodParams = next(iter(METHOD_MODELS.values()))
+
+
+def default_params() -> BaseModel:
+    """Parameters used when a request gives none."""
+    return METHOD_MODELS[DEFAULT_METHOD](method=DEFAULT_METHOD)
+
+
+# -- requests -------------------------------------------------------------------------------
+
+Vector3 = tuple[float, float, float]
+
+
+class CloudRequest(BaseModel):
+    """A cloud sent as JSON arrays (the alternative to a multipart file upload)."""
+
+    model_config = ConfigDict(extra="forbid")
+
+    points: list[Vector3] = Field(description="Coordinates, one [x, y, z] per point.")
+    normals: list[Vector3] | None = Field(
+        None, description="Optional per-point normals, same length as points.")
+    faces: list[tuple[int, int, int]] | None = Field(
+        None, description="Optional triangles as vertex indices (kept in PLY results).")
+    params: MethodParams | None = Field(  # type: ignore[valid-type]
+        None, description="Method and fit parameters; default: method 'knn' with defaults.")
+
+
+class MultipartCloudRequest(BaseModel):
+    """A cloud file upload (multipart/form-data)."""
+
+    file: bytes = Field(json_schema_extra={"format": "binary"}, description=(
+        "The cloud file; the extension of its file name gives the format: "
+        + ", ".join(INPUT_EXTENSIONS) + "."))
+    params: str | None = Field(None, description=(
+        "JSON object with the method and fit parameters, e.g. {\"method\": \"knn\", \"k\": 10}."))
+
+
+# -- responses ------------------------------------------------------------------------------
+
+JobStatus = Literal[STATUSES]
+
+
+class Problem(BaseModel):
+    """An error, as application/problem+json (RFC 9457)."""
+
+    model_config = ConfigDict(extra="allow")
+
+    type: str = Field(description="Stable problem type, e.g. '/problems/too-few-points'.")
+    title: str
+    status: int
+    detail: str
+    instance: str | None = Field(None, description="The request path the problem occurred on.")
+
+
+class JobError(BaseModel):
+    """Why a job failed (the same members as a problem document)."""
+
+    type: str
+    title: str
+    status: int
+    detail: str
+
+
+class JobInput(BaseModel):
+    kind: Literal["file", "arrays"]
+    filename: str | None = None
+    format: str | None = None
+    bytes: int
+
+
+class JobResult(BaseModel):
+    formats: list[str] = Field(description="Formats the result can be downloaded in.")
+    status_counts: dict[str, int] = Field(description="Number of points per status name.")
+    dropped_points: int = 0
+    compute_seconds: float | None = None
+
+
+class Job(BaseModel):
+    """A curvature job and its state."""
+
+    id: str
+    status: JobStatus
+    progress: float = Field(ge=0.0, le=1.0)
+    method: str
+    params: dict[str, Any]
+    input: JobInput
+    n_points: int | None
+    attempts: int
+    created_at: datetime
+    started_at: datetime | None
+    finished_at: datetime | None
+    expires_at: datetime | None
+    error: JobError | None
+    result: JobResult | None
+    links: dict[str, str]
+
+
+class JobPage(BaseModel):
+    items: list[Job]
+    next_cursor: str | None = Field(description="Pass as ?cursor= for the next page.")
+
+
+class ParameterInfo(BaseModel):
+    name: str
+    type: str
+    default: Any
+    minimum: float | None = None
+    maximum: float | None = None
+    choices: list[Any] | None = None
+    help: str = ""
+    applies_to_fit: str | None = None
+
+
+class MethodInfo(BaseModel):
+    name: str
+    description: str
+    parameters: list[ParameterInfo]
+
+
+class FitInfo(BaseModel):
+    name: str
+    parameters: list[ParameterInfo]
+
+
+class MethodsResponse(BaseModel):
+    methods: list[MethodInfo]
+    fits: list[FitInfo]
+    orientations: list[str]
+    default_method: str
+    input_formats: list[str]
+    result_formats: list[str]
+
+
+def parameter_info(spec: ParamSpec, applies_to_fit: str | None = None) -> ParameterInfo:
+    return ParameterInfo(name=spec.name, type=spec.kind.__name__, default=spec.default,
+                         minimum=spec.minimum, maximum=spec.maximum,
+                         choices=list(spec.choices) if spec.choices else None, help=spec.help,
+                         applies_to_fit=applies_to_fit)
+
+
+def methods_response() -> MethodsResponse:
+    """Everything GET /v1/methods reports, from the core's specs."""
+    methods = []
+    for name, finder in sorted(curvature.FINDERS.items()):
+        doc = (finder.__doc__ or "").strip().splitlines()
+        methods.append(MethodInfo(name=name, description=doc[0] if doc else "",
+                                  parameters=[parameter_info(s) for s in finder.PARAMS]))
+    fits = [FitInfo(name=fit, parameters=[
+        parameter_info(s, FIT_ONLY.get(s.name)) for s in FIT_PARAMS
+        if FIT_ONLY.get(s.name) in (None, fit)]) for fit in curvature.FITS]
+    return MethodsResponse(methods=methods, fits=fits,
+                           orientations=list(curvature.ORIENTATIONS),
+                           default_method=DEFAULT_METHOD, input_formats=list(INPUT_EXTENSIONS),
+                           result_formats=list(RESULT_FORMATS))
+
+
+def timestamp(value: float | None) -> datetime | None:
+    return None if value is None else datetime.fromtimestamp(value, tz=UTC)

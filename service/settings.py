@@ -1,0 +1,80 @@
+"""Service settings, read from ``CURVATURE_*`` environment variables."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+from typing import Literal
+
+from pydantic import Field
+from pydantic_settings import BaseSettings, SettingsConfigDict
+
+# forkserver forks workers from a small clean process that has already imported numpy/numba,
+# so a fresh worker starts in a fraction of a second; spawn is the portable fallback.
+DEFAULT_START_METHOD = "forkserver" if sys.platform.startswith("linux") else "spawn"
+
+
+class Settings(BaseSettings):
+    """Everything an operator can tune; each field ``name`` is read from ``CURVATURE_NAME``.
+
+    Examples
+    --------
+    ``CURVATURE_PORT=9000 CURVATURE_DATA_DIR=/var/lib/curvature python -m service``
+    """
+
+    model_config = SettingsConfigDict(env_prefix="CURVATURE_", extra="ignore")
+
+    host: str = Field("127.0.0.1", description="Interface to listen on.")
+    port: int = Field(8000, ge=0, le=65535, description="TCP port.")
+    data_dir: Path = Field(Path("data"), description="Job store, inputs and results live here.")
+    log_level: Literal["debug", "info", "warning", "error"] = "info"
+
+    executor: Literal["local", "dask"] = Field(
+        "local", description="'local': process pool on this machine; 'dask': not available yet.")
+    dask_address: str | None = Field(None, description="Scheduler address for executor 'dask'.")
+    workers: int = Field(2, ge=1, le=256, description="Worker processes in the local pool.")
+    start_method: Literal["spawn", "forkserver"] = Field(
+        DEFAULT_START_METHOD, description="multiprocessing start method of the pool.")
+    estimate_workers: int = Field(
+        1, ge=0, le=256,
+        description="Threads each job may use inside the library (0: the library's default).")
+    warmup: bool = Field(
+        True, description="Compile the numeric kernels in every worker at startup.")
+
+    max_upload_bytes: int = Field(
+        1 << 30, ge=1024, description="Largest accepted request body (file uploads).")
+    max_json_bytes: int = Field(
+        64 << 20, ge=1024, description="Largest accepted JSON body (parsed in memory).")
+    sync_max_points: int = Field(
+        50_000, ge=10, description="Largest cloud POST /v1/curvature answers synchronously.")
+    max_pending_sync: int = Field(
+        8, ge=1, description="Synchronous requests allowed to wait for a worker at once.")
+    max_queued_jobs: int = Field(
+        1000, ge=1, description="Unfinished jobs accepted before answering 503.")
+    max_attempts: int = Field(
+        3, ge=1, description="Runs of one job (crashes, restarts) before it is marked failed.")
+    retry_after_seconds: int = Field(5, ge=1, description="Retry-After sent with 503.")
+
+    result_ttl_seconds: float = Field(
+        24 * 3600, gt=0, description="Finished jobs and their files are deleted after this.")
+    cleanup_interval_seconds: float = Field(
+        60, gt=0, description="How often expired jobs are looked for.")
+    progress_interval_seconds: float = Field(
+        0.5, gt=0, description="Minimum time between two progress writes of a job.")
+    dispatch_poll_seconds: float = Field(
+        1.0, gt=0, description="Dispatcher re-reads the queue at least this often.")
+
+    @property
+    def db_path(self) -> Path:
+        """SQLite job store."""
+        return self.data_dir / "jobs.sqlite3"
+
+    @property
+    def jobs_dir(self) -> Path:
+        """One sub-folder per job: input, canonical result, rendered formats."""
+        return self.data_dir / "jobs"
+
+    @property
+    def tmp_dir(self) -> Path:
+        """Scratch space of synchronous requests and unfinished uploads."""
+        return self.data_dir / "tmp"

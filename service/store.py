@@ -1,0 +1,334 @@
+"""Durable job store on SQLite (WAL mode).
+
+The store is the single source of truth of every job: a job exists once its row is committed,
+before any work is scheduled, and the worker processes update their own rows (claim, progress,
+outcome) through their own connections. A ``run_token`` written at claim time fences stale
+workers: after a restart re-queues a job, updates from an older run match no row.
+"""
+
+from __future__ import annotations
+
+import json
+import sqlite3
+import time
+import uuid
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+QUEUED, RUNNING, SUCCEEDED, FAILED, CANCELLED = (
+    "queued", "running", "succeeded", "failed", "cancelled")
+STATUSES = (QUEUED, RUNNING, SUCCEEDED, FAILED, CANCELLED)
+FINAL_STATUSES = (SUCCEEDED, FAILED, CANCELLED)
+
+SCHEMA_VERSION = 1
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS jobs (
+    seq INTEGER PRIMARY KEY AUTOINCREMENT,
+    id TEXT NOT NULL UNIQUE,
+    owner TEXT NOT NULL,
+    status TEXT NOT NULL,
+    progress REAL NOT NULL DEFAULT 0,
+    params TEXT NOT NULL,
+    input_kind TEXT NOT NULL,
+    input_file TEXT NOT NULL,
+    input_name TEXT,
+    input_format TEXT,
+    input_bytes INTEGER NOT NULL,
+    n_points INTEGER,
+    created_at REAL NOT NULL,
+    started_at REAL,
+    finished_at REAL,
+    expires_at REAL,
+    attempts INTEGER NOT NULL DEFAULT 0,
+    run_token TEXT,
+    error TEXT,
+    summary TEXT
+);
+CREATE INDEX IF NOT EXISTS jobs_owner_seq ON jobs (owner, seq);
+CREATE INDEX IF NOT EXISTS jobs_status_seq ON jobs (status, seq);
+CREATE INDEX IF NOT EXISTS jobs_expires ON jobs (expires_at);
+"""
+
+
+@dataclass
+class Job:
+    """One row of the ``jobs`` table, JSON columns decoded."""
+
+    seq: int
+    id: str
+    owner: str
+    status: str
+    progress: float
+    params: dict
+    input_kind: str
+    input_file: str
+    input_name: str | None
+    input_format: str | None
+    input_bytes: int
+    n_points: int | None
+    created_at: float
+    started_at: float | None
+    finished_at: float | None
+    expires_at: float | None
+    attempts: int
+    run_token: str | None
+    error: dict | None
+    summary: dict | None
+
+    @classmethod
+    def from_row(cls, row: sqlite3.Row) -> Job:
+        values = dict(row)
+        for key in ("params", "error", "summary"):
+            if values[key] is not None:
+                values[key] = json.loads(values[key])
+        return cls(**values)
+
+    @property
+    def is_final(self) -> bool:
+        return self.status in FINAL_STATUSES
+
+
+def new_job_id() -> str:
+    """A random, unguessable job id (32 hex digits)."""
+    return uuid.uuid4().hex
+
+
+def connect(db_path: str | Path) -> sqlite3.Connection:
+    """Open a connection in autocommit mode; transactions are explicit (``BEGIN IMMEDIATE``).
+
+    ``synchronous=FULL`` makes every commit durable even against power loss; commits are few
+    (a handful per job plus throttled progress), so the fsyncs are cheap.
+    """
+    conn = sqlite3.connect(str(db_path), timeout=30.0, isolation_level=None,
+                           check_same_thread=False)
+    conn.row_factory = sqlite3.Row
+    conn.execute("PRAGMA busy_timeout = 30000")
+    conn.execute("PRAGMA synchronous = FULL")
+    conn.execute("PRAGMA foreign_keys = ON")
+    return conn
+
+
+class JobStore:
+    """All reads and writes of job rows.
+
+    A connection is opened per operation: it is cheap for SQLite, keeps every method
+    thread-safe, and works the same in the server and in worker processes.
+
+    Parameters
+    ----------
+    db_path : path
+        The SQLite file; created with its folder by :meth:`initialize`.
+    """
+
+    def __init__(self, db_path: str | Path):
+        self.db_path = Path(db_path)
+
+    @contextmanager
+    def _conn(self) -> Iterator[sqlite3.Connection]:
+        conn = connect(self.db_path)
+        try:
+            yield conn
+        finally:
+            conn.close()
+
+    @contextmanager
+    def _transaction(self) -> Iterator[sqlite3.Connection]:
+        with self._conn() as conn:
+            conn.execute("BEGIN IMMEDIATE")
+            try:
+                yield conn
+            except BaseException:
+                conn.execute("ROLLBACK")
+                raise
+            conn.execute("COMMIT")
+
+    # -- setup and recovery ------------------------------------------------------------------
+
+    def initialize(self) -> None:
+        """Create the file and schema, switch the journal to WAL (a persistent setting)."""
+        self.db_path.parent.mkdir(parents=True, exist_ok=True)
+        with self._conn() as conn:
+            mode = conn.execute("PRAGMA journal_mode = WAL").fetchone()[0]
+            if mode.lower() != "wal":
+                raise RuntimeError(f"{self.db_path}: SQLite refused WAL mode (got {mode!r})")
+            conn.executescript(_SCHEMA)
+            conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
+
+    def ping(self) -> bool:
+        """True when the database answers a trivial query."""
+        try:
+            with self._conn() as conn:
+                conn.execute("SELECT 1 FROM jobs LIMIT 1").fetchall()
+            return True
+        except sqlite3.Error:
+            return False
+
+    def requeue_interrupted(self, max_attempts: int, error: dict) -> tuple[int, int]:
+        """After a restart: put jobs left ``running`` back in the queue.
+
+        A job that already used ``max_attempts`` runs is marked failed with ``error`` instead,
+        so a job that kills its worker cannot loop forever.
+
+        Returns
+        -------
+        requeued, failed : int
+        """
+        now = time.time()
+        with self._transaction() as conn:
+            failed = conn.execute(
+                "UPDATE jobs SET status = ?, finished_at = ?, error = ?, run_token = NULL "
+                "WHERE status = ? AND attempts >= ?",
+                (FAILED, now, json.dumps(error), RUNNING, max_attempts)).rowcount
+            requeued = conn.execute(
+                "UPDATE jobs SET status = ?, progress = 0, run_token = NULL WHERE status = ?",
+                (QUEUED, RUNNING)).rowcount
+        return requeued, failed
+
+    # -- server side -------------------------------------------------------------------------
+
+    def insert(self, *, job_id: str, owner: str, params: dict, input_kind: str,
+               input_file: str, input_name: str | None, input_format: str | None,
+               input_bytes: int, n_points: int | None) -> Job:
+        """Commit a new ``queued`` job and return it."""
+        with self._transaction() as conn:
+            conn.execute(
+                "INSERT INTO jobs (id, owner, status, params, input_kind, input_file, "
+                "input_name, input_format, input_bytes, n_points, created_at) "
+                "VALUES (?, ?, ?, ?, ?, ?, ?, ?, ?, ?, ?)",
+                (job_id, owner, QUEUED, json.dumps(params), input_kind, input_file, input_name,
+                 input_format, input_bytes, n_points, time.time()))
+            row = conn.execute("SELECT * FROM jobs WHERE id = ?", (job_id,)).fetchone()
+        return Job.from_row(row)
+
+    def get(self, job_id: str) -> Job | None:
+        with self._conn() as conn:
+            row = conn.execute("SELECT * FROM jobs WHERE id = ?", (job_id,)).fetchone()
+        return None if row is None else Job.from_row(row)
+
+    def list_jobs(self, owner: str, *, limit: int, before_seq: int | None = None,
+             status: str | None = None) -> list[Job]:
+        """The owner's jobs, newest first, starting below ``before_seq`` (keyset paging)."""
+        sql = "SELECT * FROM jobs WHERE owner = ?"
+        args: list[Any] = [owner]
+        if before_seq is not None:
+            sql += " AND seq < ?"
+            args.append(before_seq)
+        if status is not None:
+            sql += " AND status = ?"
+            args.append(status)
+        sql += " ORDER BY seq DESC LIMIT ?"
+        args.append(limit)
+        with self._conn() as conn:
+            rows = conn.execute(sql, args).fetchall()
+        return [Job.from_row(r) for r in rows]
+
+    def count_unfinished(self) -> int:
+        with self._conn() as conn:
+            return conn.execute("SELECT COUNT(*) FROM jobs WHERE status IN (?, ?)",
+                                (QUEUED, RUNNING)).fetchone()[0]
+
+    def count_by_status(self) -> dict[str, int]:
+        with self._conn() as conn:
+            rows = conn.execute("SELECT status, COUNT(*) FROM jobs GROUP BY status").fetchall()
+        counts = dict.fromkeys(STATUSES, 0)
+        counts.update({r[0]: r[1] for r in rows})
+        return counts
+
+    def next_queued(self, limit: int, exclude: set[str]) -> list[str]:
+        """Ids of the oldest queued jobs not in ``exclude`` (already handed to the pool)."""
+        with self._conn() as conn:
+            rows = conn.execute("SELECT id FROM jobs WHERE status = ? ORDER BY seq LIMIT ?",
+                                (QUEUED, limit + len(exclude))).fetchall()
+        return [r[0] for r in rows if r[0] not in exclude][:limit]
+
+    def cancel(self, job_id: str, ttl: float) -> Job | None:
+        """Mark a queued or running job cancelled; the running worker notices and stops.
+
+        Returns the updated job, or ``None`` when it was not queued or running.
+        """
+        now = time.time()
+        with self._transaction() as conn:
+            changed = conn.execute(
+                "UPDATE jobs SET status = ?, finished_at = ?, expires_at = ? "
+                "WHERE id = ? AND status IN (?, ?)",
+                (CANCELLED, now, now + ttl, job_id, QUEUED, RUNNING)).rowcount
+            row = conn.execute("SELECT * FROM jobs WHERE id = ?", (job_id,)).fetchone()
+        return Job.from_row(row) if changed else None
+
+    def delete(self, job_id: str) -> bool:
+        with self._transaction() as conn:
+            return conn.execute("DELETE FROM jobs WHERE id = ?", (job_id,)).rowcount > 0
+
+    def requeue_after_crash(self, job_id: str, max_attempts: int, error: dict) -> str | None:
+        """The worker of a running job died: queue it again, or fail it after too many runs.
+
+        Returns the new status, or ``None`` when the job was no longer running.
+        """
+        with self._transaction() as conn:
+            row = conn.execute("SELECT status, attempts FROM jobs WHERE id = ?",
+                               (job_id,)).fetchone()
+            if row is None or row["status"] != RUNNING:
+                return None
+            if row["attempts"] >= max_attempts:
+                conn.execute(
+                    "UPDATE jobs SET status = ?, finished_at = ?, error = ?, run_token = NULL "
+                    "WHERE id = ?", (FAILED, time.time(), json.dumps(error), job_id))
+                return FAILED
+            conn.execute("UPDATE jobs SET status = ?, progress = 0, run_token = NULL "
+                         "WHERE id = ?", (QUEUED, job_id))
+            return QUEUED
+
+    def expired(self, now: float) -> list[str]:
+        """Ids of final jobs whose retention time has passed."""
+        with self._conn() as conn:
+            rows = conn.execute(
+                "SELECT id FROM jobs WHERE expires_at IS NOT NULL AND expires_at <= ? "
+                "AND status IN (?, ?, ?)", (now, *FINAL_STATUSES)).fetchall()
+        return [r[0] for r in rows]
+
+    def all_ids(self) -> set[str]:
+        with self._conn() as conn:
+            return {r[0] for r in conn.execute("SELECT id FROM jobs").fetchall()}
+
+    # -- worker side -------------------------------------------------------------------------
+
+    def claim(self, job_id: str, run_token: str) -> Job | None:
+        """Move a queued job to running under ``run_token``; ``None`` if it is not queued."""
+        with self._transaction() as conn:
+            changed = conn.execute(
+                "UPDATE jobs SET status = ?, started_at = ?, progress = 0, "
+                "attempts = attempts + 1, run_token = ? WHERE id = ? AND status = ?",
+                (RUNNING, time.time(), run_token, job_id, QUEUED)).rowcount
+            row = conn.execute("SELECT * FROM jobs WHERE id = ?", (job_id,)).fetchone()
+        return Job.from_row(row) if changed else None
+
+    def report_progress(self, job_id: str, run_token: str, progress: float) -> bool:
+        """Store progress; False when this run no longer owns the job (cancelled, re-queued)."""
+        with self._conn() as conn:
+            changed = conn.execute(
+                "UPDATE jobs SET progress = ? WHERE id = ? AND run_token = ? AND status = ?",
+                (float(progress), job_id, run_token, RUNNING)).rowcount
+        return changed > 0
+
+    def set_points(self, job_id: str, run_token: str, n_points: int) -> None:
+        with self._conn() as conn:
+            conn.execute("UPDATE jobs SET n_points = ? WHERE id = ? AND run_token = ?",
+                         (n_points, job_id, run_token))
+
+    def finish(self, job_id: str, run_token: str, *, status: str, ttl: float,
+               error: dict | None = None, summary: dict | None = None) -> bool:
+        """Record the outcome of a run; False when the run no longer owns the job."""
+        now = time.time()
+        with self._transaction() as conn:
+            changed = conn.execute(
+                "UPDATE jobs SET status = ?, progress = CASE WHEN ? THEN 1.0 ELSE progress END, "
+                "finished_at = ?, expires_at = ?, error = ?, summary = ? "
+                "WHERE id = ? AND run_token = ? AND status = ?",
+                (status, status == SUCCEEDED, now, now + ttl,
+                 None if error is None else json.dumps(error),
+                 None if summary is None else json.dumps(summary),
+                 job_id, run_token, RUNNING)).rowcount
+        return changed > 0

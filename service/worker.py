@@ -1,0 +1,238 @@
+"""Code that runs inside the worker processes of the pool.
+
+Everything here is a plain top-level function so it can be sent to a spawned or
+forkserver-started process. Workers talk to the job store through their own SQLite
+connections: they claim a job, write its progress, notice a cancellation (the progress
+callback raises, which aborts ``curvature.estimate``) and record the outcome.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import select
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+import curvature
+
+from .inputs import CloudInput, check_cloud, load_input
+from .problem_types import ProblemError
+from .result_files import CANONICAL_RESULT, save_canonical, write_result
+from .store import CANCELLED, FAILED, SUCCEEDED, JobStore
+
+log = logging.getLogger("service.worker")
+
+INTERNAL_ERROR_DETAIL = "unexpected error while computing; it has been logged on the server"
+
+# Share of the progress bar spent before and inside the estimate (reading comes first).
+_LOADED, _ESTIMATED = 0.05, 0.95
+
+
+class JobAborted(Exception):
+    """Raised from the progress callback when the job was cancelled or taken over."""
+
+
+def init_worker(log_level: str = "INFO", server_pid: int | None = None) -> None:
+    """Pool initializer: log to stderr, and exit as soon as the server process is gone.
+
+    A worker must not outlive a killed server: the next server start runs the job again, and
+    an orphan would keep burning a core on a result nobody records (the run token would
+    reject it anyway).
+    """
+    logging.basicConfig(level=log_level.upper(), stream=sys.stderr,
+                        format="%(asctime)s %(levelname)s %(name)s[%(process)d]: %(message)s")
+    if server_pid is not None:
+        threading.Thread(target=_exit_with, args=(server_pid,), name="server-watchdog",
+                         daemon=True).start()
+
+
+def _exit_with(pid: int) -> None:
+    """Block until process ``pid`` ends, then end this process at once.
+
+    The parent-death signal cannot serve here: with the forkserver start method the
+    parent is the fork server, which outlives the service.
+    """
+    try:
+        fd = os.pidfd_open(pid)  # readable once the process has exited (Linux >= 5.3)
+    except (AttributeError, OSError):
+        fd = None
+    if fd is not None:
+        select.select([fd], [], [])
+    else:
+        while True:
+            try:
+                os.kill(pid, 0)
+            except ProcessLookupError:
+                break
+            except PermissionError:
+                pass
+            time.sleep(1.0)
+    os._exit(70)
+
+
+def warmup() -> int:
+    """Run a tiny estimate so the numba kernels are compiled before the first job.
+
+    Returns the worker's pid (the pool uses it to count warmed workers).
+    """
+    golden = np.pi * (3.0 - np.sqrt(5.0))
+    i = np.arange(400)
+    z = 1.0 - 2.0 * (i + 0.5) / i.size
+    r = np.sqrt(1.0 - z * z)
+    sphere = np.column_stack([r * np.cos(golden * i), r * np.sin(golden * i), z])
+    try:
+        curvature.estimate(sphere, method="knn", k=10, workers=1)
+    except Exception:  # warm-up is an optimisation; a failure must not take the pool down
+        log.exception("warm-up estimate failed")
+    return os.getpid()
+
+
+# -- computing -----------------------------------------------------------------------------
+
+def compute(cloud: CloudInput, params: dict, workers: int, progress=None):
+    """Call ``curvature.estimate`` with the validated job parameters.
+
+    ``params`` is the JSON form of a :mod:`service.schemas` method model: ``method``, the
+    common fit/orientation fields, and the method's own parameters.
+    """
+    p = dict(params)
+    method = p.pop("method")
+    common = {"fit": p.pop("fit", "implicit"), "orientation": p.pop("orientation", None),
+              "viewpoint": p.pop("viewpoint", None)}
+    solver = p.pop("solver", None)
+    if solver is not None:
+        p["solver"] = solver
+    try:
+        result = curvature.estimate(cloud.points, method, normals=cloud.normals,
+                                    faces=cloud.faces, workers=workers or None,
+                                    progress=progress, **common, **p)
+    except curvature.ParameterError as exc:
+        raise ProblemError("invalid-parameters", str(exc)) from None
+    except curvature.CurvatureInputError as exc:
+        raise ProblemError("invalid-cloud", str(exc)) from None
+    if result.faces is None and cloud.faces is not None:
+        result.faces = cloud.faces  # the result PLY keeps the input mesh
+    return result
+
+
+def summarize(result, cloud: CloudInput, seconds: float) -> dict:
+    """What a finished job reports besides its files."""
+    return {"n_points": len(result), "status_counts": result.status_counts(),
+            "dropped_points": cloud.dropped, "compute_seconds": round(seconds, 3),
+            "has_faces": result.faces is not None}
+
+
+class ProgressReporter:
+    """Throttled progress writes that double as the cancellation check."""
+
+    def __init__(self, store: JobStore, job_id: str, run_token: str, interval: float):
+        self.store, self.job_id, self.run_token = store, job_id, run_token
+        self.interval = interval
+        self.last = -float("inf")
+        self.aborted = False
+
+    def __call__(self, fraction: float, force: bool = False) -> None:
+        now = time.monotonic()
+        if self.aborted:
+            raise JobAborted(self.job_id)
+        if not force and now - self.last < self.interval:
+            return
+        self.last = now
+        if not self.store.report_progress(self.job_id, self.run_token, fraction):
+            self.aborted = True
+            raise JobAborted(self.job_id)
+
+    def on_estimate(self, done: int, total: int) -> None:
+        """The ``progress(done, total)`` callback given to ``curvature.estimate``."""
+        self(_LOADED + (_ESTIMATED - _LOADED) * done / max(total, 1))
+
+
+def run_job(db_path: str, jobs_dir: str, job_id: str, run_token: str, options: dict) -> str:
+    """Run one queued job to its end and record the outcome in the store.
+
+    Parameters
+    ----------
+    db_path, jobs_dir : str
+        Locations of the store and of the job folders.
+    job_id, run_token : str
+        The job, and the token that fences this run against stale ones.
+    options : dict
+        ``estimate_workers``, ``progress_interval``, ``result_ttl``.
+
+    Returns
+    -------
+    str
+        The status this run left the job in, or ``"skipped"`` if it was no longer queued.
+    """
+    store = JobStore(db_path)
+    job = store.claim(job_id, run_token)
+    if job is None:
+        return "skipped"
+    folder = Path(jobs_dir) / job_id
+    reporter = ProgressReporter(store, job_id, run_token, options["progress_interval"])
+    ttl = options["result_ttl"]
+    started = time.perf_counter()
+    try:
+        cloud = load_input(folder / job.input_file, job.input_kind, job.input_name)
+        check_cloud(cloud)
+        store.set_points(job_id, run_token, len(cloud.points))
+        reporter(_LOADED, force=True)
+        result = compute(cloud, job.params, options["estimate_workers"], reporter.on_estimate)
+        if reporter.aborted:
+            raise JobAborted(job_id)
+        reporter(_ESTIMATED, force=True)
+        save_canonical(result, folder / CANONICAL_RESULT)
+        summary = summarize(result, cloud, time.perf_counter() - started)
+        if not store.finish(job_id, run_token, status=SUCCEEDED, ttl=ttl, summary=summary):
+            raise JobAborted(job_id)
+        # The result holds points and faces, so the input is no longer needed.
+        (folder / job.input_file).unlink(missing_ok=True)
+        return SUCCEEDED
+    except JobAborted:
+        (folder / CANONICAL_RESULT).unlink(missing_ok=True)
+        return CANCELLED
+    except ProblemError as exc:
+        store.finish(job_id, run_token, status=FAILED, ttl=ttl, error=exc.to_dict())
+        return FAILED
+    except MemoryError:
+        log.error("job %s ran out of memory", job_id)
+        store.finish(job_id, run_token, status=FAILED, ttl=ttl, error=ProblemError(
+            "internal-error", "the worker ran out of memory for this cloud").to_dict())
+        return FAILED
+    except Exception:
+        log.exception("job %s failed unexpectedly", job_id)
+        store.finish(job_id, run_token, status=FAILED, ttl=ttl,
+                     error=ProblemError("internal-error", INTERNAL_ERROR_DETAIL).to_dict())
+        return FAILED
+
+
+def run_sync(input_path: str, kind: str, display_name: str | None, params: dict, fmt: str,
+             out_dir: str, max_points: int, workers: int) -> str:
+    """Compute a small cloud right away and write the result in ``fmt``; return its path.
+
+    Raises
+    ------
+    ProblemError
+        Bad file, bad cloud, bad parameters, or more than ``max_points`` points.
+    """
+    cloud = load_input(Path(input_path), kind, display_name)
+    check_cloud(cloud)
+    if len(cloud.points) > max_points:
+        raise ProblemError("too-many-points",
+                           f"the cloud has {len(cloud.points)} points; synchronous answers "
+                           f"are limited to {max_points}; submit it to POST /v1/jobs")
+    try:
+        result = compute(cloud, params, workers)
+        target = Path(out_dir) / f"result.{fmt}"
+        write_result(result, target, fmt)
+    except ProblemError:
+        raise
+    except Exception:
+        log.exception("synchronous request failed unexpectedly")
+        raise ProblemError("internal-error", INTERNAL_ERROR_DETAIL) from None
+    return str(target)

@@ -1,0 +1,56 @@
+"""Settings come from CURVATURE_* environment variables."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from pydantic import ValidationError
+
+from service.settings import Settings
+
+
+def test_defaults(monkeypatch):
+    for name in ("HOST", "PORT", "DATA_DIR", "WORKERS", "EXECUTOR"):
+        monkeypatch.delenv(f"CURVATURE_{name}", raising=False)
+    settings = Settings()
+    assert (settings.host, settings.port, settings.data_dir) == ("127.0.0.1", 8000, Path("data"))
+    assert settings.executor == "local"
+    assert settings.db_path == Path("data") / "jobs.sqlite3"
+
+
+def test_environment_overrides(monkeypatch, tmp_path):
+    monkeypatch.setenv("CURVATURE_HOST", "0.0.0.0")
+    monkeypatch.setenv("CURVATURE_PORT", "9123")
+    monkeypatch.setenv("CURVATURE_DATA_DIR", str(tmp_path))
+    monkeypatch.setenv("CURVATURE_MAX_UPLOAD_BYTES", "123456")
+    monkeypatch.setenv("CURVATURE_SYNC_MAX_POINTS", "77")
+    monkeypatch.setenv("CURVATURE_WORKERS", "3")
+    monkeypatch.setenv("CURVATURE_RESULT_TTL_SECONDS", "60")
+    monkeypatch.setenv("CURVATURE_START_METHOD", "spawn")
+    settings = Settings()
+    assert settings.host == "0.0.0.0" and settings.port == 9123
+    assert settings.data_dir == tmp_path and settings.jobs_dir == tmp_path / "jobs"
+    assert settings.max_upload_bytes == 123456 and settings.sync_max_points == 77
+    assert settings.workers == 3 and settings.result_ttl_seconds == 60
+    assert settings.start_method == "spawn"
+
+
+def test_bad_values_are_refused(monkeypatch):
+    monkeypatch.setenv("CURVATURE_WORKERS", "0")
+    with pytest.raises(ValidationError):
+        Settings()
+    monkeypatch.setenv("CURVATURE_WORKERS", "1")
+    monkeypatch.setenv("CURVATURE_EXECUTOR", "kubernetes")
+    with pytest.raises(ValidationError):
+        Settings()
+
+
+def test_dask_executor_is_refused_clearly(tmp_path):
+    from service.executor import create_executor
+    from service.metrics import ServiceMetrics
+    from service.store import JobStore
+
+    settings = Settings(data_dir=tmp_path, executor="dask")
+    with pytest.raises(RuntimeError, match="dask"):
+        create_executor(settings, JobStore(settings.db_path), ServiceMetrics())
