@@ -8,11 +8,11 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
-from scipy.sparse import coo_matrix
+from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
 
 # Neighbors per point in the graph the orientation propagates over (the nearest ones).
-ORIENT_K = 10
+ORIENT_K = 8
 
 
 def signs_from_normals(est: np.ndarray, given: np.ndarray) -> np.ndarray:
@@ -87,18 +87,10 @@ def signs_auto(points: np.ndarray, est: np.ndarray, graph: np.ndarray) -> np.nda
     """
     n = points.shape[0]
     valid = np.isfinite(est).all(axis=1)
-    k = graph.shape[1]
-    src = np.repeat(np.arange(n, dtype=np.int64), k)
-    dst = graph.ravel().astype(np.int64)
-    ok = dst >= 0
-    ok[ok] = valid[src[ok]] & valid[dst[ok]] & (src[ok] != dst[ok])
-    src, dst = src[ok], dst[ok]
-    dot = np.abs(np.einsum("ij,ij->i", est[src], est[dst]))
-    # Zero weights would read as missing edges; keep them strictly positive.
-    weights = np.maximum(1.0 - dot, 0.0) + 1e-12
+    indptr, indices, weights = weighted_graph(graph, est, valid)
     # The graph need not be symmetric: the spanning tree treats i->j and j->i as one undirected
     # edge, and their weights are equal, so the result does not depend on the point order.
-    graph_csr = coo_matrix((weights, (src, dst)), shape=(n, n)).tocsr()
+    graph_csr = csr_matrix((weights, indices, indptr), shape=(n, n))
     tree_graph = minimum_spanning_tree(graph_csr)
     sym = (tree_graph + tree_graph.T).tocsr()
     n_comp, labels = connected_components(sym, directed=False)
@@ -106,6 +98,45 @@ def signs_auto(points: np.ndarray, est: np.ndarray, graph: np.ndarray) -> np.nda
     centroids = component_centroids(points, labels, n_comp, valid)
     return propagate_signs(sym.indptr.astype(np.int64), sym.indices.astype(np.int64), est,
                            seeds, centroids[labels[seeds]], points)
+
+
+@njit(cache=True)
+def weighted_graph(graph, est, valid):
+    """CSR arrays of the orientation graph with weights 1 - |ni . nj| (kept above zero).
+
+    Parameters
+    ----------
+    graph : ndarray, shape (n, k), int
+        Neighbor indices, -1 for none.
+    est : ndarray, shape (n, 3)
+        Unit normals.
+    valid : ndarray, shape (n,), bool
+        Points with a normal; edges touching others are left out.
+
+    Returns
+    -------
+    indptr : ndarray, shape (n + 1,), int64
+    indices : ndarray, shape (nnz,), int32
+    weights : ndarray, shape (nnz,), float64
+    """
+    n, k = graph.shape
+    indptr = np.zeros(n + 1, np.int64)
+    indices = np.empty(n * k, np.int32)
+    weights = np.empty(n * k)
+    nnz = 0
+    for i in range(n):
+        if valid[i]:
+            for t in range(k):
+                j = graph[i, t]
+                if j < 0 or j == i or not valid[j]:
+                    continue
+                dot = est[i, 0] * est[j, 0] + est[i, 1] * est[j, 1] + est[i, 2] * est[j, 2]
+                # Zero weights would read as missing edges; keep them strictly positive.
+                weights[nnz] = max(1.0 - abs(dot), 0.0) + 1e-12
+                indices[nnz] = j
+                nnz += 1
+        indptr[i + 1] = nnz
+    return indptr, indices[:nnz], weights[:nnz]
 
 
 def component_centroids(points, labels, n_comp, valid) -> np.ndarray:

@@ -28,6 +28,7 @@ from .orientation import (
     signs_from_viewpoint,
 )
 from .result import CurvatureResult
+from .spatial_order import inverse_permutation, morton_order
 from .validation import as_faces, as_points, as_vectors
 
 ORIENTATIONS = ("auto", "normals", "viewpoint")
@@ -154,10 +155,17 @@ def estimate(points, method: str = "knn", *, fit: str = "implicit", orientation=
     if isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size < 1:
         raise ParameterError(f"chunk_size must be a whole number >= 1, got {chunk_size!r}")
 
-    tree = cKDTree(pts, balanced_tree=False, compact_nodes=False)
-    finder = make_finder(pts, method, faces=tri, tree=tree, **method_params)
-    res = empty_result(pts, tri)
-    # The first neighbors of each point, kept for the orientation graph (40 bytes a point).
+    # Work on a Z-ordered copy so neighbor reads stay local; every per-point computation is
+    # unchanged, and the outputs are put back in input order at the end.
+    order = morton_order(pts)
+    inv = inverse_permutation(order)
+    spts = np.ascontiguousarray(pts[order])
+    s_normals = None if ref_normals is None else ref_normals[order]
+    s_faces = None if tri is None else inv[tri]
+    tree = cKDTree(spts, balanced_tree=False, compact_nodes=False)
+    finder = make_finder(spts, method, faces=s_faces, tree=tree, **method_params)
+    res = empty_result(spts, s_faces)
+    # The first neighbors of each point, kept for the orientation graph (32 bytes a point).
     graph = np.empty((n, ORIENT_K), np.int32) if mode == "auto" else None
     timings = {"neighbors": 0.0, "fit": 0.0, "orientation": 0.0}
     with numba_threads(nthreads):
@@ -167,7 +175,7 @@ def estimate(points, method: str = "knn", *, fit: str = "implicit", orientation=
             t0 = time.perf_counter()
             nbhd = finder.query(query, workers=nthreads)
             t1 = time.perf_counter()
-            out = fit_neighborhoods(pts, query, nbhd, fit, fit_opts["solver"],
+            out = fit_neighborhoods(spts, query, nbhd, fit, fit_opts["solver"],
                                     fit_opts["include_self"])
             timings["neighbors"] += t1 - t0
             timings["fit"] += time.perf_counter() - t1
@@ -181,8 +189,9 @@ def estimate(points, method: str = "knn", *, fit: str = "implicit", orientation=
             if progress is not None:
                 progress(stop, n)
         t0 = time.perf_counter()
-        orient(res, mode, ref_normals, vp, graph)
+        orient(res, mode, s_normals, vp, graph)
         timings["orientation"] = time.perf_counter() - t0
+    res = unpermute(res, inv, pts, tri)
     res.mean[:] = 0.5 * (res.k1 + res.k2)
     res.gaussian[:] = res.k1 * res.k2
     timings["total"] = time.perf_counter() - t_start
@@ -203,6 +212,12 @@ def empty_result(pts: np.ndarray, faces) -> CurvatureResult:
         normals=np.empty((n, 3)), dir1=np.empty((n, 3)), dir2=np.empty((n, 3)),
         neighbor_count=np.empty(n, np.int32), status=np.empty(n, np.int8),
         residual=np.empty(n), faces=faces)
+
+
+def unpermute(res: CurvatureResult, inv: np.ndarray, pts: np.ndarray, faces) -> CurvatureResult:
+    """The result of the Z-ordered cloud in input order (``inv`` from inverse_permutation)."""
+    fields = {name: arr[inv] for name, arr in res.fields().items()}
+    return CurvatureResult(points=pts, faces=faces, **fields)
 
 
 def orient(res: CurvatureResult, mode: str, ref_normals, viewpoint, graph) -> None:
