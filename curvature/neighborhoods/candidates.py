@@ -72,13 +72,21 @@ def split_blocks(m: int) -> int:
 
 
 class TreeMixin:
-    """Adds :attr:`nbtree`, the numba k-d tree over ``self.points``, built on first use."""
+    """Adds :attr:`nbpoints` and :attr:`nbtree` (numba k-d tree), both made on first use."""
 
     _nbtree: tuple | None = None
+    _nbpoints: np.ndarray | None = None
+
+    @property
+    def nbpoints(self) -> np.ndarray:
+        """The cloud as a C-contiguous float64 array, shape (n, 3), for the numba kernels."""
+        if self._nbpoints is None:
+            self._nbpoints = np.ascontiguousarray(self.points, dtype=np.float64)
+        return self._nbpoints
 
     @property
     def nbtree(self) -> tuple:
         """The tree of :func:`.kdtree.build_tree` over the cloud."""
         if self._nbtree is None:
-            self._nbtree = build_tree(self.points)
+            self._nbtree = build_tree(self.nbpoints)
         return self._nbtree

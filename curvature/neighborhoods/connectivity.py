@@ -49,16 +49,19 @@ def _edges_to_csr(src, dst, n):
     for v in range(n):
         s = ptr[v]
         e = ptr[v + 1]
-        if e - s > 32:
-            tmp[s:e] = np.sort(tmp[s:e])
-        else:
-            for i in range(s + 1, e):
+        # shell sort of the row (insertion sort for the usual short rows)
+        gap = 1
+        while 3 * gap + 1 < e - s:
+            gap = 3 * gap + 1
+        while gap >= 1:
+            for i in range(s + gap, e):
                 x = tmp[i]
                 j = i
-                while j > s and tmp[j - 1] > x:
-                    tmp[j] = tmp[j - 1]
-                    j -= 1
+                while j >= s + gap and tmp[j - gap] > x:
+                    tmp[j] = tmp[j - gap]
+                    j -= gap
                 tmp[j] = x
+            gap //= 3
         for i in range(s, e):
             if i == s or tmp[i] != tmp[i - 1]:
                 out[w] = tmp[i]
@@ -207,6 +210,69 @@ def voronoi_neighbors(yx, yy, flags, vx, vy, vl, s, wx, wy, wl):
 
 
 @njit(cache=True)
+def sym3_eigen(a):
+    """Eigen decomposition of a symmetric 3x3 matrix by cyclic Jacobi rotations.
+
+    Parameters
+    ----------
+    a : ndarray, shape (3, 3), float64
+        Overwritten: ends (nearly) diagonal, holding the eigenvalues.
+
+    Returns
+    -------
+    w : ndarray, shape (3,)
+        Eigenvalues, increasing.
+    v : ndarray, shape (3, 3)
+        Matching unit eigenvectors in the columns.
+    """
+    v = np.eye(3)
+    for _ in range(32):
+        off = a[0, 1] * a[0, 1] + a[0, 2] * a[0, 2] + a[1, 2] * a[1, 2]
+        scale = a[0, 0] * a[0, 0] + a[1, 1] * a[1, 1] + a[2, 2] * a[2, 2]
+        if not off > 1e-30 * scale:
+            break
+        for p, q in ((0, 1), (0, 2), (1, 2)):
+            apq = a[p, q]
+            if apq == 0.0:
+                continue
+            theta = (a[q, q] - a[p, p]) / (2.0 * apq)
+            t = 1.0 / (abs(theta) + np.sqrt(theta * theta + 1.0))
+            if theta < 0.0:
+                t = -t
+            c = 1.0 / np.sqrt(t * t + 1.0)
+            s = t * c
+            for r in range(3):  # columns p, q of a
+                arp = a[r, p]
+                arq = a[r, q]
+                a[r, p] = c * arp - s * arq
+                a[r, q] = s * arp + c * arq
+            for r in range(3):  # rows p, q of a
+                apr = a[p, r]
+                aqr = a[q, r]
+                a[p, r] = c * apr - s * aqr
+                a[q, r] = s * apr + c * aqr
+            for r in range(3):
+                vrp = v[r, p]
+                vrq = v[r, q]
+                v[r, p] = c * vrp - s * vrq
+                v[r, q] = s * vrp + c * vrq
+    w = np.empty(3)
+    vs = np.empty((3, 3))
+    i0, i1, i2 = 0, 1, 2
+    if a[i1, i1] < a[i0, i0]:
+        i0, i1 = i1, i0
+    if a[i2, i2] < a[i1, i1]:
+        i1, i2 = i2, i1
+    if a[i1, i1] < a[i0, i0]:
+        i0, i1 = i1, i0
+    for col, j in enumerate((i0, i1, i2)):
+        w[col] = a[j, j]
+        for r in range(3):
+            vs[r, col] = v[r, j]
+    return w, vs
+
+
+@njit(cache=True)
 def tangent_frame(points, p, ids, k):
     """Unit tangent vectors of the PCA plane of ``points[p]`` and ``points[ids[:k]]``.
 
@@ -237,12 +303,30 @@ def tangent_frame(points, p, ids, k):
     cov[1, 0] = cov[0, 1]
     cov[2, 0] = cov[0, 2]
     cov[2, 1] = cov[1, 2]
-    _, vecs = np.linalg.eigh(cov)
+    _, vecs = sym3_eigen(cov)
     return vecs[:, 2].copy(), vecs[:, 1].copy()
 
 
 @njit(cache=True)
 def _delaunay_range(points, tree, idx, order, lo, hi, k, nbr, flags):
+    """Local tangent-plane Delaunay neighbors of ``idx[order[lo:hi]]`` into ``nbr``/``flags``.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3), float64
+    tree : tuple
+        :func:`.kdtree.build_tree` over ``points``.
+    idx : ndarray, shape (m,), int64
+    order : ndarray, shape (m,), int64
+        Processing order (results do not depend on it).
+    lo, hi : int
+    k : int
+        Neighbors triangulated with each point, ``1 <= k <= n - 1``.
+    nbr : ndarray, shape (m, k), int64
+        Output: the k nearest neighbors, nearest first.
+    flags : ndarray, shape (m, k), bool
+        Output: True for the Delaunay neighbors.
+    """
     snode, sdist, bufd, bufi = knn_scratch(tree, k)
     ds = np.empty(k)
     ids = np.empty(k, np.int64)
@@ -276,6 +360,7 @@ def _delaunay_range(points, tree, idx, order, lo, hi, k, nbr, flags):
 
 @njit(cache=True, parallel=True)
 def _delaunay_parallel(points, tree, idx, order, k, nbr, flags):
+    """:func:`_delaunay_range` over all queries, blocks of :data:`BLOCK` queries in parallel."""
     m = idx.shape[0]
     nblocks = (m + BLOCK - 1) // BLOCK
     for blk in prange(nblocks):
@@ -311,9 +396,11 @@ def tangent_delaunay(points: np.ndarray, tree: tuple, k: int, parallel: bool = F
         idx = np.arange(n, dtype=np.int64)
     idx = np.ascontiguousarray(idx, dtype=np.int64)
     k = min(k, n - 1)
+    nbr = np.empty((idx.size, max(k, 0)), np.int64)
+    flags = np.zeros((idx.size, max(k, 0)), np.bool_)
+    if k < 1:
+        return nbr, flags
     order = query_order(tree, idx)
-    nbr = np.empty((idx.size, k), np.int64)
-    flags = np.zeros((idx.size, k), np.bool_)
     if parallel:
         _delaunay_parallel(points, tree, idx, order, k, nbr, flags)
     else:

@@ -157,6 +157,7 @@ def _egg_range(points, tree, idx, order, lo, hi, k, alpha2, min_nb, out, counts)
 
 @njit(cache=True, parallel=True)
 def _egg_parallel(points, tree, idx, order, k, alpha2, min_nb, out, counts):
+    """:func:`_egg_range` over all queries, blocks of :data:`BLOCK` queries in parallel."""
     m = idx.shape[0]
     nblocks = (m + BLOCK - 1) // BLOCK
     for blk in prange(nblocks):
@@ -223,6 +224,8 @@ class EggFinder(TreeMixin, NeighborFinder):
         alpha2 = alphas * alphas
         n = self.points.shape[0]
         k = min(p["candidates"], n - 1)
+        if k < 1:  # a single point: nobody to list
+            return Neighborhoods(np.zeros(idx.size + 1, np.int64), np.zeros(0, np.int32))
         min_nb = p["min_neighbors"]
         tree = self.nbtree
         step = max(1, CHUNK_ENTRIES // k)
@@ -234,9 +237,9 @@ class EggFinder(TreeMixin, NeighborFinder):
             counts = np.zeros(sub.size, np.int64)
             with numba_threads(workers) as parallel:
                 if parallel:
-                    _egg_parallel(self.points, tree, sub, order, k, alpha2, min_nb, out, counts)
+                    _egg_parallel(self.nbpoints, tree, sub, order, k, alpha2, min_nb, out, counts)
                 else:
-                    _egg_range(self.points, tree, sub, order, 0, sub.size, k, alpha2, min_nb,
+                    _egg_range(self.nbpoints, tree, sub, order, 0, sub.size, k, alpha2, min_nb,
                                out, counts)
             parts.append(to_csr(out, counts, n))
         return Neighborhoods.concatenate(parts)

@@ -7,8 +7,9 @@ tree's shape: the k points q != p with the smallest ``(d2, index)`` pairs, where
 bounding-box distance used for pruning never exceeds the ``d2`` of a point inside the box, also
 in floating point, so pruning loses nothing.
 
-The tree splits the widest side of each node's bounding box at its midpoint (sliding-midpoint
-style, robust to duplicates: a node whose points coincide stays a leaf).
+The tree splits the widest side of each node's bounding box at its midpoint (a node whose
+points coincide stays a leaf, so duplicates are harmless). Queries are best run in tree order
+(:func:`query_order`): neighboring queries then touch the same memory.
 """
 
 from __future__ import annotations
@@ -20,10 +21,32 @@ LEAF_SIZE = 12
 
 
 @njit(cache=True)
+def _grow_nodes(cap, nn, start, stop, left, right, level, bmin, bmax, stack):
+    """Copies of the node arrays with room for ``cap`` nodes (the first ``nn`` kept)."""
+    start2 = np.empty(cap, np.int64)
+    stop2 = np.empty(cap, np.int64)
+    left2 = np.full(cap, -1, np.int64)
+    right2 = np.full(cap, -1, np.int64)
+    level2 = np.zeros(cap, np.int64)
+    bmin2 = np.empty((cap, 3))
+    bmax2 = np.empty((cap, 3))
+    stack2 = np.empty(cap, np.int64)
+    start2[:nn] = start[:nn]
+    stop2[:nn] = stop[:nn]
+    left2[:nn] = left[:nn]
+    right2[:nn] = right[:nn]
+    level2[:nn] = level[:nn]
+    bmin2[:nn] = bmin[:nn]
+    bmax2[:nn] = bmax[:nn]
+    stack2[:nn] = stack[:nn]
+    return start2, stop2, left2, right2, level2, bmin2, bmax2, stack2
+
+
+@njit(cache=True)
 def _build(points, leaf_size):
     n = points.shape[0]
     perm = np.arange(n)
-    cap = 2 * n + 1
+    cap = 64 + (4 * n) // max(1, leaf_size)
     start = np.empty(cap, np.int64)
     stop = np.empty(cap, np.int64)
     left = np.full(cap, -1, np.int64)
@@ -79,6 +102,10 @@ def _build(points, leaf_size):
                 j -= 1
         if i == s or i == e:
             continue  # no split possible at this precision
+        if nn + 2 > cap:
+            cap = 2 * cap
+            start, stop, left, right, level, bmin, bmax, stack = _grow_nodes(
+                cap, nn, start, stop, left, right, level, bmin, bmax, stack)
         left[node] = nn
         right[node] = nn + 1
         start[nn] = s

@@ -62,7 +62,7 @@ class MeshFinder(TreeMixin, NeighborFinder):
                     self._graph = face_graph(self.faces, n)
                 else:
                     with numba_threads(workers) as parallel:
-                        self._graph = cloud_graph(self.points, self.nbtree,
+                        self._graph = cloud_graph(self.nbpoints, self.nbtree,
                                                   self.params["k_delaunay"], parallel)
             return self._graph
 

@@ -157,7 +157,7 @@ def _tc_range(points, tree, idx, order, lo, hi, k, betas, ncand, min_nb, out,
                 xx = ds[ci]
                 live = full
                 for j in range(na):
-                    if am[j] & live == 0:
+                    if (am[j] & live) == 0:
                         continue
                     ax = a0[j] * x0 + a1[j] * x1 + a2[j] * x2
                     aa = aas[j]
@@ -204,6 +204,7 @@ def _tc_range(points, tree, idx, order, lo, hi, k, betas, ncand, min_nb, out,
 
 @njit(cache=True, parallel=True)
 def _tc_parallel(points, tree, idx, order, k, betas, ncand, min_nb, out, counts):
+    """:func:`_tc_range` over all queries, blocks of :data:`BLOCK` queries in parallel."""
     m = idx.shape[0]
     nblocks = (m + BLOCK - 1) // BLOCK
     for blk in prange(nblocks):
@@ -275,6 +276,8 @@ class TerritoryFinder(TreeMixin, NeighborFinder):
         betas = self.betas
         n = self.points.shape[0]
         k = min(ncand + min_nb - 1, n - 1)
+        if k < 1:  # a single point: nobody to list
+            return Neighborhoods(np.zeros(idx.size + 1, np.int64), np.zeros(0, np.int32))
         tree = self.nbtree
         step = max(1, CHUNK_ENTRIES // k)
         parts = []
@@ -285,10 +288,10 @@ class TerritoryFinder(TreeMixin, NeighborFinder):
             counts = np.zeros(sub.size, np.int64)
             with numba_threads(workers) as parallel:
                 if parallel:
-                    _tc_parallel(self.points, tree, sub, order, k, betas, ncand, min_nb,
+                    _tc_parallel(self.nbpoints, tree, sub, order, k, betas, ncand, min_nb,
                                  out, counts)
                 else:
-                    _tc_range(self.points, tree, sub, order, 0, sub.size, k, betas, ncand,
+                    _tc_range(self.nbpoints, tree, sub, order, 0, sub.size, k, betas, ncand,
                               min_nb, out, counts)
             parts.append(to_csr(out, counts, n))
         return Neighborhoods.concatenate(parts)

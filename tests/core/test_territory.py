@@ -88,6 +88,19 @@ def test_candidates_are_exact_nearest_with_index_ties():
             assert np.array_equal(d2[p], dd[pool[:17]])
 
 
+def test_nearest_on_a_deep_tree():
+    # clusters at wildly different scales: a deep, unbalanced tree that outgrows its first
+    # node arrays (leaf size 1)
+    rng = np.random.default_rng(8)
+    pts = np.r_[rng.normal(size=(3000, 3)) * 1e-6, rng.normal(size=(50, 3)) * 1e3,
+                2.0 ** -np.arange(600)[:, None] * np.ones((1, 3))]
+    tree = build_tree(pts, 1)
+    assert tree[9] > 100
+    nbr, _ = knn_rows(pts, tree, np.arange(len(pts)), 8)
+    for p in range(0, len(pts), 29):
+        assert nbr[p].tolist() == ref_sorted_pool(pts, p)[0][:8]
+
+
 @pytest.mark.parametrize("seed", range(200))
 def test_matches_reference_on_random_clouds(seed):
     rng = np.random.default_rng(seed)
