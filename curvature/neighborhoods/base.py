@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ..errors import ParameterError
 from ..params import ParamSpec, resolve_params
 
 
@@ -88,6 +89,13 @@ class NeighborFinder(ABC):
 
     def validate(self, params: dict) -> None:  # noqa: B027 - optional hook
         """Check constraints between parameters; raise ParameterError on conflict."""
+
+    def require_enough_candidates(self, params: dict) -> None:
+        """Candidate-based methods cannot gather more neighbors than they examine."""
+        if params["candidates"] < params["min_neighbors"]:
+            raise ParameterError(
+                f"method '{self.name}': candidates ({params['candidates']}) must be >= "
+                f"min_neighbors ({params['min_neighbors']})")
 
     @abstractmethod
     def query(self, idx: np.ndarray, workers: int = 1) -> Neighborhoods:

@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from ..fitting.linalg import jacobi_eigh
 from .candidates import BLOCK
 from .kdtree import knn_point, knn_scratch, query_order
 
@@ -210,69 +211,6 @@ def voronoi_neighbors(yx, yy, flags, vx, vy, vl, s, wx, wy, wl):
 
 
 @njit(cache=True)
-def sym3_eigen(a):
-    """Eigen decomposition of a symmetric 3x3 matrix by cyclic Jacobi rotations.
-
-    Parameters
-    ----------
-    a : ndarray, shape (3, 3), float64
-        Overwritten: ends (nearly) diagonal, holding the eigenvalues.
-
-    Returns
-    -------
-    w : ndarray, shape (3,)
-        Eigenvalues, increasing.
-    v : ndarray, shape (3, 3)
-        Matching unit eigenvectors in the columns.
-    """
-    v = np.eye(3)
-    for _ in range(32):
-        off = a[0, 1] * a[0, 1] + a[0, 2] * a[0, 2] + a[1, 2] * a[1, 2]
-        scale = a[0, 0] * a[0, 0] + a[1, 1] * a[1, 1] + a[2, 2] * a[2, 2]
-        if not off > 1e-30 * scale:
-            break
-        for p, q in ((0, 1), (0, 2), (1, 2)):
-            apq = a[p, q]
-            if apq == 0.0:
-                continue
-            theta = (a[q, q] - a[p, p]) / (2.0 * apq)
-            t = 1.0 / (abs(theta) + np.sqrt(theta * theta + 1.0))
-            if theta < 0.0:
-                t = -t
-            c = 1.0 / np.sqrt(t * t + 1.0)
-            s = t * c
-            for r in range(3):  # columns p, q of a
-                arp = a[r, p]
-                arq = a[r, q]
-                a[r, p] = c * arp - s * arq
-                a[r, q] = s * arp + c * arq
-            for r in range(3):  # rows p, q of a
-                apr = a[p, r]
-                aqr = a[q, r]
-                a[p, r] = c * apr - s * aqr
-                a[q, r] = s * apr + c * aqr
-            for r in range(3):
-                vrp = v[r, p]
-                vrq = v[r, q]
-                v[r, p] = c * vrp - s * vrq
-                v[r, q] = s * vrp + c * vrq
-    w = np.empty(3)
-    vs = np.empty((3, 3))
-    i0, i1, i2 = 0, 1, 2
-    if a[i1, i1] < a[i0, i0]:
-        i0, i1 = i1, i0
-    if a[i2, i2] < a[i1, i1]:
-        i1, i2 = i2, i1
-    if a[i1, i1] < a[i0, i0]:
-        i0, i1 = i1, i0
-    for col, j in enumerate((i0, i1, i2)):
-        w[col] = a[j, j]
-        for r in range(3):
-            vs[r, col] = v[r, j]
-    return w, vs
-
-
-@njit(cache=True)
 def tangent_frame(points, p, ids, k):
     """Unit tangent vectors of the PCA plane of ``points[p]`` and ``points[ids[:k]]``.
 
@@ -303,7 +241,7 @@ def tangent_frame(points, p, ids, k):
     cov[1, 0] = cov[0, 1]
     cov[2, 0] = cov[0, 2]
     cov[2, 1] = cov[1, 2]
-    _, vecs = sym3_eigen(cov)
+    _, vecs = jacobi_eigh(cov)
     return vecs[:, 2].copy(), vecs[:, 1].copy()
 
 

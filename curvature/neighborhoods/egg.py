@@ -189,10 +189,7 @@ class EggFinder(TreeMixin, NeighborFinder):
             raise ParameterError(
                 f"{where}: alpha_step ({params['alpha_step']}) must be <= "
                 f"alpha_start ({params['alpha_start']})")
-        if params["candidates"] < params["min_neighbors"]:
-            raise ParameterError(
-                f"{where}: candidates ({params['candidates']}) must be >= "
-                f"min_neighbors ({params['min_neighbors']})")
+        self.require_enough_candidates(params)
         if alpha_values(params["alpha_start"], params["alpha_step"]).size > MAX_ALPHAS:
             raise ParameterError(
                 f"{where}: alpha_start / alpha_step gives more than {MAX_ALPHAS} alpha "

@@ -239,10 +239,7 @@ class TerritoryFinder(TreeMixin, NeighborFinder):
             raise ParameterError(
                 f"{where}: beta_min ({params['beta_min']}) must be <= "
                 f"beta_max ({params['beta_max']})")
-        if params["candidates"] < params["min_neighbors"]:
-            raise ParameterError(
-                f"{where}: candidates ({params['candidates']}) must be >= "
-                f"min_neighbors ({params['min_neighbors']})")
+        self.require_enough_candidates(params)
         nb = beta_values(params["beta_min"], params["beta_max"], params["beta_step"]).size
         if nb > MAX_BETAS:
             raise ParameterError(
