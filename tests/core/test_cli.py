@@ -93,3 +93,16 @@ def test_synthetic_subcommand_writes_a_cloud(tmp_path, capsys):
     assert main(["synthetic", "torus", "--n", "500", "--noise", "0.1", "-o", str(out)]) == 0
     cloud = curvature.read(out)
     assert len(cloud) == 500 and cloud.normals is not None
+
+
+@pytest.mark.parametrize("method, options", [
+    ("tc", ["--beta-min", "1.0", "--min-neighbors", "10"]),
+    ("egg", ["--alpha-start", "0.7"]),
+    ("mesh", ["--min-neighbors", "10"]),
+])
+def test_neighbors_of_every_method(method, options, sphere_file, capsys):
+    assert main(["neighbors", str(sphere_file), "--method", method, "--index", "123", *options]) \
+        == 0
+    first = capsys.readouterr().out.splitlines()[0]
+    assert f"method {method}" in first
+    assert int(first.split(";")[-1].split()[0]) >= 10
