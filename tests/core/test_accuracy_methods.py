@@ -6,9 +6,10 @@ mean absolute error of k1 and of k2 must stay within 3 % of the curvature scale,
 interior points only). Failed points count as failures, not as errors: fewer than 0.1 % may
 fail. The median error must stay within 3 % for every combination.
 
-Measured exceptions are marked ``xfail`` with their numbers (see ``KNOWN_MEAN_FAILURES``): the
-implicit quadric on about ten neighbors is nearly interpolating (10 coefficients), and a few
-points in 10,000 get wild values that dominate the mean even without noise.
+Measured exceptions (``KNOWN_MEAN_FAILURES``, with their numbers): the implicit quadric on about
+ten neighbors is nearly interpolating (10 coefficients), and a few points in 10,000 get wild
+values that dominate the mean even without noise. For those the mean over the best 99 % of the
+points is held to 3 % instead, so the test still fails if the bulk of the points degrades.
 """
 
 import numpy as np
@@ -53,8 +54,8 @@ def clouds():
 
 
 @pytest.fixture(scope="module")
-def summaries(clouds):
-    """Error statistics per (label, fit, shape), relative to the shape's curvature scale."""
+def relative_errors(clouds):
+    """Per-point errors per (label, fit, shape), relative to the shape's curvature scale."""
     cache = {}
 
     def get(label, fit, shape):
@@ -66,23 +67,34 @@ def summaries(clouds):
             res = curvature.estimate(cloud.points, method, fit=fit, normals=cloud.normals,
                                      **params)
             err = point_errors(res, cloud.k1, cloud.k2, cloud.interior)
-            relative = PointErrors(k1=err.k1 / scale, k2=err.k2 / scale, failed=err.failed)
-            cache[label, fit, shape] = error_summary(relative)
+            cache[label, fit, shape] = PointErrors(k1=err.k1 / scale, k2=err.k2 / scale,
+                                                   failed=err.failed)
         return cache[label, fit, shape]
 
     return get
 
 
+@pytest.fixture(scope="module")
+def summaries(relative_errors):
+    """Error statistics per (label, fit, shape), relative to the shape's curvature scale."""
+    return lambda label, fit, shape: error_summary(relative_errors(label, fit, shape))
+
+
+def trimmed_mean(values: np.ndarray, keep: float = 0.99) -> float:
+    """Mean of the smallest ``keep`` share of the finite values."""
+    v = np.sort(values[np.isfinite(values)])
+    return float(v[: int(np.ceil(keep * v.size))].mean())
+
+
 CASES = [(label, fit, shape) for label in METHODS for fit in FITS for shape in SHAPES]
 
 
-def _mark(case):
-    reason = KNOWN_MEAN_FAILURES.get(case)
-    marks = [pytest.mark.xfail(reason=reason, strict=False)] if reason else []
-    return pytest.param(*case, marks=marks, id="-".join(case))
+MEAN_CASES = [c for c in CASES if c not in KNOWN_MEAN_FAILURES]
+TRIMMED_CASES = [c for c in CASES if c in KNOWN_MEAN_FAILURES]
 
 
-@pytest.mark.parametrize(("label", "fit", "shape"), [_mark(c) for c in CASES])
+@pytest.mark.parametrize(("label", "fit", "shape"), MEAN_CASES,
+                         ids=["-".join(c) for c in MEAN_CASES])
 def test_mean_error_within_three_percent(summaries, label, fit, shape):
     stats = summaries(label, fit, shape)
     assert stats["failure_rate"] < 1e-3, stats
@@ -96,3 +108,12 @@ def test_median_error_within_three_percent(summaries, label, fit, shape):
     assert stats["failure_rate"] < 1e-3, stats
     assert stats["k1_median"] < TOLERANCE, stats
     assert stats["k2_median"] < TOLERANCE, stats
+
+
+@pytest.mark.parametrize(("label", "fit", "shape"), TRIMMED_CASES,
+                         ids=["-".join(c) for c in TRIMMED_CASES])
+def test_trimmed_mean_error_within_three_percent(relative_errors, label, fit, shape):
+    err = relative_errors(label, fit, shape)
+    assert err.failed.mean() < 1e-3
+    assert trimmed_mean(err.k1) < TOLERANCE, KNOWN_MEAN_FAILURES[label, fit, shape]
+    assert trimmed_mean(err.k2) < TOLERANCE, KNOWN_MEAN_FAILURES[label, fit, shape]
