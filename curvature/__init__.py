@@ -10,7 +10,14 @@ Public surface (DESIGN.md section 5)::
 
 from . import synthetic
 from .cloud import PointCloud
-from .errors import CurvatureInputError, FormatError, ParameterError, UnknownFormatError
+from .errors import (
+    CurvatureInputError,
+    FormatError,
+    NonFiniteError,
+    ParameterError,
+    TooFewPointsError,
+    UnknownFormatError,
+)
 from .fitting import FIT_PARAMS
 from .io import read, write
 from .neighborhoods import FINDERS, Neighborhoods, neighbors
@@ -29,11 +36,13 @@ __all__ = [
     "CurvatureInputError",
     "CurvatureResult",
     "FormatError",
+    "NonFiniteError",
     "Neighborhoods",
     "ParamSpec",
     "ParameterError",
     "PointCloud",
     "Status",
+    "TooFewPointsError",
     "UnknownFormatError",
     "estimate",
     "neighbors",

@@ -51,3 +51,11 @@ class FormatError(CurvatureInputError):
 
 class UnknownFormatError(FormatError):
     """The file extension or declared format is not one the library reads or writes."""
+
+
+class TooFewPointsError(FormatError):
+    """The file holds no points, or fewer than the 10 a curvature estimate needs."""
+
+
+class NonFiniteError(FormatError):
+    """A point of the file has a NaN or infinite coordinate."""

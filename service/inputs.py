@@ -55,12 +55,9 @@ def _file_problem(exc: curvature.FormatError, display_name: str) -> ProblemError
 def _file_problem_slug(exc: curvature.FormatError) -> str:
     if isinstance(exc, curvature.UnknownFormatError):
         return "unknown-format"
-    # The reader checks point count and finiteness itself and says so only in its message;
-    # these phrases come from curvature/io/checks.py (a test pins them).
-    reason = exc.reason.lower()
-    if "nan or inf" in reason:
+    if isinstance(exc, curvature.NonFiniteError):
         return "non-finite-coordinates"
-    if "holds no points" in reason or ("at least" in reason and "needed" in reason):
+    if isinstance(exc, curvature.TooFewPointsError):
         return "too-few-points"
     return "malformed-file"
 

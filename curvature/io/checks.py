@@ -11,7 +11,7 @@ from collections.abc import Callable
 import numpy as np
 
 from ..cloud import PointCloud
-from ..errors import FormatError
+from ..errors import NonFiniteError, TooFewPointsError
 from ..validation import MIN_POINTS
 
 Locator = Callable[[int], dict]
@@ -51,14 +51,14 @@ def finish_cloud(source, points, *, normals=None, faces=None, properties=None, d
     pts = np.ascontiguousarray(points, dtype=np.float64)
     n = pts.shape[0]
     if n == 0:
-        raise FormatError(source, "the file holds no points")
+        raise TooFewPointsError(source, "the file holds no points")
     if n < MIN_POINTS:
-        raise FormatError(source, f"only {n} points, at least {MIN_POINTS} are needed")
+        raise TooFewPointsError(source, f"only {n} points, at least {MIN_POINTS} are needed")
     finite = np.isfinite(pts).all(axis=1)
     if not finite.all():
         bad = np.flatnonzero(~finite)
         row = int(bad[0])
-        raise FormatError(
+        raise NonFiniteError(
             source, f"{label} {row} has a NaN or Inf coordinate {pts[row].tolist()} "
                     f"({bad.size} of {n} {label} rows are non-finite)", **where(row))
     if normals is not None:

@@ -8,7 +8,7 @@ import re
 import numpy as np
 
 from ..cloud import PointCloud
-from ..errors import FormatError
+from ..errors import FormatError, NonFiniteError
 from .checks import finish_cloud
 from .faces import ragged_take, triangulate
 from .tokens import decode_text, numbers, split_rows
@@ -151,7 +151,7 @@ def read_stl(data: bytes, source=None) -> PointCloud:
     finite = np.isfinite(corners).all(axis=1)
     if not finite.all():
         corner = int(np.flatnonzero(~finite)[0])
-        raise FormatError(source, f"triangle {corner // 3} has a NaN or Inf coordinate",
+        raise NonFiniteError(source, f"triangle {corner // 3} has a NaN or Inf coordinate",
                           **where(corner))
     if corners.shape[0] == 0:
         raise FormatError(source, "the file holds no triangles")

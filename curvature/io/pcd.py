@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..cloud import PointCloud
-from ..errors import FormatError
+from ..errors import FormatError, NonFiniteError
 from .checks import finish_cloud
 from .lzf import LZFError, lzf_decompress
 from .tokens import numbers, split_rows
@@ -252,6 +252,6 @@ def _to_cloud(columns, h: PCDHeader, source) -> PointCloud:
             for j in range(values.shape[1]):
                 properties[f"{name}_{j}"] = values[:, j].copy()
     if points.shape[0] == 0 and dropped:
-        raise FormatError(source, f"all {dropped} points have a NaN or Inf coordinate")
+        raise NonFiniteError(source, f"all {dropped} points have a NaN or Inf coordinate")
     return finish_cloud(source, points, normals=normals, properties=properties,
                         dropped=dropped, label="point")

@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import os
 import struct
-import time
 
 import numpy as np
 import pytest
@@ -672,10 +671,7 @@ REAL = {
 @pytest.mark.parametrize("name", list(REAL))
 def test_real_scans_load(shared_data, name):
     n, m, dropped = REAL[name]
-    start = time.perf_counter()
     cloud = read(shared_data / name)
-    elapsed = time.perf_counter() - start
-    print(f"{name}: {elapsed:.3f} s")
     assert len(cloud) == n and cloud.dropped == dropped
     assert cloud.points.dtype == np.float64 and np.isfinite(cloud.points).all()
     assert (cloud.faces is None) if m is None else cloud.faces.shape == (m, 3)
