@@ -13,7 +13,6 @@ from contextlib import contextmanager
 
 import numba
 import numpy as np
-from scipy.spatial import cKDTree
 
 from .cloud import PointCloud
 from .errors import ParameterError
@@ -162,8 +161,7 @@ def estimate(points, method: str = "knn", *, fit: str = "implicit", orientation=
     spts = np.ascontiguousarray(pts[order])
     s_normals = None if ref_normals is None else ref_normals[order]
     s_faces = None if tri is None else inv[tri]
-    tree = cKDTree(spts, balanced_tree=False, compact_nodes=False)
-    finder = make_finder(spts, method, faces=s_faces, tree=tree, **method_params)
+    finder = make_finder(spts, method, faces=s_faces, **method_params)
     res = empty_result(spts, s_faces)
     # The first neighbors of each point, kept for the orientation graph (32 bytes a point).
     graph = np.empty((n, ORIENT_K), np.int32) if mode == "auto" else None
