@@ -23,21 +23,12 @@ def _grow(indptr, indices, p, min_nb, buf, mark):
     """Rings around p; returns ``(count, buf)`` (``buf`` grows when needed, ``mark`` is reset)."""
     total = 0
     mark[p] = True
-    for e in range(indptr[p], indptr[p + 1]):
-        v = indices[e]
-        if not mark[v]:
-            mark[v] = True
-            if total == buf.shape[0]:
-                nb = np.empty(2 * buf.shape[0] + 16, np.int64)
-                nb[:total] = buf[:total]
-                buf = nb
-            buf[total] = v
-            total += 1
-    lo = 0
-    hi = total
+    # Frontier buf[lo:hi]; the first frontier is p itself (slot -1), so ring 1 is its edges.
+    lo = -1
+    hi = 0
     while total < min_nb and hi > lo:
         for f in range(lo, hi):
-            u = buf[f]
+            u = p if f < 0 else buf[f]
             for e in range(indptr[u], indptr[u + 1]):
                 v = indices[e]
                 if not mark[v]:
