@@ -16,7 +16,7 @@ import numpy as np
 
 from .cloud import PointCloud
 from .errors import ParameterError
-from .fitting import FIT_PARAMS, FITS, fit_neighborhoods, resolve_fit
+from .fitting import FIT_PARAMS, FITS, fit_neighborhoods, resolve_fit, stage1_normals
 from .neighborhoods import make_finder
 from .orientation import (
     ORIENT_K,
@@ -104,8 +104,11 @@ def estimate(points, method: str = "knn", *, fit: str = "implicit", orientation=
         Coordinates. A PointCloud also supplies normals and faces unless given here.
     method : {"knn", "tc", "egg", "mesh"}
         Neighborhood method (DESIGN.md 4.1-4.4); its parameters go in ``**params``.
-    fit : {"implicit", "monge"}
+    fit : {"implicit", "monge", "nfr"}
         Fit model (DESIGN.md 4.5). ``solver="taubin"|"algebraic"`` selects the implicit solver.
+        "nfr" (normal-field regression) regresses PCA normals (``normal_k`` neighbors) on
+        position over the neighborhood; it is made for large neighborhoods on noisy data
+        (e.g. ``k=384``; docs/research/issue6.md).
     orientation : {"auto", "normals", "viewpoint"}, optional
         How normal signs are fixed; by default "normals" when normals are given, "viewpoint"
         when a viewpoint is given, else "auto".
@@ -163,10 +166,16 @@ def estimate(points, method: str = "knn", *, fit: str = "implicit", orientation=
     s_faces = None if tri is None else inv[tri]
     finder = make_finder(spts, method, faces=s_faces, **method_params)
     res = empty_result(spts, s_faces)
+    stage1 = None
     # The first neighbors of each point, kept for the orientation graph (32 bytes a point).
     graph = np.empty((n, ORIENT_K), np.int32) if mode == "auto" else None
     timings = {"neighbors": 0.0, "fit": 0.0, "orientation": 0.0}
     with numba_threads(nthreads):
+        if fit == "nfr":
+            t0 = time.perf_counter()
+            stage1 = stage1_normals(spts, make_finder(spts, "knn", k=fit_opts["normal_k"]),
+                                    chunk_size, nthreads)
+            timings["stage1_normals"] = time.perf_counter() - t0
         for start in range(0, n, chunk_size):
             stop = min(start + chunk_size, n)
             query = np.arange(start, stop, dtype=np.int64)
@@ -174,7 +183,7 @@ def estimate(points, method: str = "knn", *, fit: str = "implicit", orientation=
             nbhd = finder.query(query, workers=nthreads)
             t1 = time.perf_counter()
             out = fit_neighborhoods(spts, query, nbhd, fit, fit_opts["solver"],
-                                    fit_opts["include_self"])
+                                    fit_opts["include_self"], stage1)
             timings["neighbors"] += t1 - t0
             timings["fit"] += time.perf_counter() - t1
             sl = slice(start, stop)

@@ -24,7 +24,7 @@ DEFAULT_METHOD = "knn"
 
 FIT_PARAMS: tuple[ParamSpec, ...] = tuple(curvature.FIT_PARAMS)
 # Parameters that only make sense for one fit model.
-FIT_ONLY = {"solver": "implicit"}
+FIT_ONLY = dict(curvature.fitting.FIT_ONLY)
 
 
 def _annotation(spec: ParamSpec) -> Any:
