@@ -44,8 +44,8 @@ def timed(fn, repeat: int) -> tuple[float, list[float]]:
 
 def bench_estimate(points, repeat, workers):
     rows = []
-    configs = [("knn", "monge", {}), ("knn", "implicit", {}), ("knn", "implicit",
-                                                               {"solver": "algebraic"})]
+    configs = [("knn", "monge", {}), ("knn", "implicit", {}),
+               ("knn", "implicit", {"solver": "algebraic"}), ("knn", "nfr", {"k": 384})]
     for method in ("tc", "egg", "mesh"):
         if method in curvature.FINDERS:
             configs.append((method, "monge", {}))
