@@ -22,7 +22,7 @@ run: $(STAMP)
 demo: $(STAMP)
 	mkdir -p data
 	$(PY) -m curvature synthetic torus --n 20000 --noise 0.1 --seed 1 -o data/demo_torus.ply
-	$(PY) -m curvature estimate data/demo_torus.ply -o data/demo_torus_curvature.ply
+	$(PY) -m curvature estimate data/demo_torus.ply -o data/demo_torus_curvature.ply --fit monge
 
 test: $(STAMP)
 	$(PY) -m ruff check .
