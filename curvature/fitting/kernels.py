@@ -25,6 +25,7 @@ from .quadric import (
     NON_FINITE,
     OK,
     TOO_FEW,
+    clear_outputs,
     foot_point,
     sampson_rms,
     shape_operator,
@@ -261,13 +262,7 @@ def fit_batch(points, query, indptr, indices, fit, solver, include_self,
     m = query.shape[0]
     need = MIN_POINTS_IMPLICIT if fit == FIT_IMPLICIT else MIN_POINTS_MONGE
     for j in prange(m):
-        k1[j] = np.nan
-        k2[j] = np.nan
-        residual[j] = np.nan
-        for d in range(3):
-            normals[j, d] = np.nan
-            dir1[j, d] = np.nan
-            dir2[j, d] = np.nan
+        clear_outputs(j, k1, k2, residual, normals, dir1, dir2)
         nbr = indices[indptr[j]:indptr[j + 1]]
         count = nbr.shape[0] + (1 if include_self else 0)
         if count < need:

@@ -15,7 +15,15 @@ from numba import njit, prange
 
 from .kernels import gather_local, principal_axes
 from .linalg import cholesky, solve_lower, solve_upper_t
-from .quadric import DEGENERATE, NON_FINITE, OK, TOO_FEW, tangent_basis
+from .quadric import (
+    DEGENERATE,
+    NON_FINITE,
+    OK,
+    TOO_FEW,
+    clear_outputs,
+    tangent_basis,
+    tangent_eigen,
+)
 
 # Constant, 2 linear, 3 quadratic and 4 cubic monomials of the tangent coordinates.
 N_TERMS = 10
@@ -81,13 +89,7 @@ def nfr_batch(points, stage1, query, indptr, indices, include_self,
     """
     for j in prange(query.shape[0]):
         row = np.empty(N_TERMS)  # per iteration: a buffer shared across threads would race
-        k1[j] = np.nan
-        k2[j] = np.nan
-        residual[j] = np.nan
-        for d in range(3):
-            normals[j, d] = np.nan
-            dir1[j, d] = np.nan
-            dir2[j, d] = np.nan
+        clear_outputs(j, k1, k2, residual, normals, dir1, dir2)
         p = query[j]
         nbr = indices[indptr[j]:indptr[j + 1]]
         m = nbr.shape[0] + (1 if include_self else 0)
@@ -153,16 +155,7 @@ def nfr_batch(points, stage1, query, indptr, indices, include_self,
         s11 = beta0[1] / h
         s22 = beta1[2] / h
         s12 = 0.5 * (beta0[2] + beta1[1]) / h
-        half_tr = 0.5 * (s11 + s22)
-        rad = np.sqrt(0.25 * (s11 - s22) ** 2 + s12 * s12)
-        c1 = half_tr + rad
-        c2 = half_tr - rad
-        if s11 >= s22:
-            e1, e2 = c1 - s22, s12
-        else:
-            e1, e2 = s12, c1 - s11
-        en = np.sqrt(e1 * e1 + e2 * e2)
-        d1 = (e1 * t1 + e2 * t2) / en if en > 0.0 else t1.copy()
+        c1, c2, d1 = tangent_eigen(s11, s12, s22, t1, t2)
         # The intercepts are the tangent components of the smoothed normal at p.
         nn = n_p + beta0[0] * t1 + beta1[0] * t2
         nn /= np.sqrt(np.sum(nn * nn))

@@ -83,6 +83,53 @@ def tangent_basis(n):
 
 
 @njit(cache=True)
+def tangent_eigen(s11, s12, s22, t1, t2):
+    """Eigen-decomposition of a symmetric 2x2 shape operator given in a tangent basis.
+
+    Parameters
+    ----------
+    s11, s12, s22 : float
+        Entries of the operator in the basis (t1, t2).
+    t1, t2 : ndarray, shape (3,)
+        Orthonormal tangent vectors.
+
+    Returns
+    -------
+    k1, k2 : float
+        Eigenvalues, k1 >= k2.
+    d1 : ndarray, shape (3,)
+        Unit eigenvector of k1 in 3D (t1 at an umbilic, where every direction is principal).
+    """
+    half_tr = 0.5 * (s11 + s22)
+    rad = np.sqrt(0.25 * (s11 - s22) ** 2 + s12 * s12)
+    k1 = half_tr + rad
+    k2 = half_tr - rad
+    # Eigenvector of k1 in the (t1, t2) basis; pick the better-conditioned of two formulas.
+    if s11 >= s22:
+        e1 = k1 - s22
+        e2 = s12
+    else:
+        e1 = s12
+        e2 = k1 - s11
+    en = np.sqrt(e1 * e1 + e2 * e2)
+    if en > 0.0:
+        return k1, k2, (e1 * t1 + e2 * t2) / en
+    return k1, k2, t1.copy()
+
+
+@njit(cache=True)
+def clear_outputs(j, k1, k2, residual, normals, dir1, dir2):
+    """Set every curvature output of query ``j`` to NaN (a failed point keeps them so)."""
+    k1[j] = np.nan
+    k2[j] = np.nan
+    residual[j] = np.nan
+    for d in range(3):
+        normals[j, d] = np.nan
+        dir1[j, d] = np.nan
+        dir2[j, d] = np.nan
+
+
+@njit(cache=True)
 def shape_operator(g, hess):
     """Principal curvatures and directions of an implicit surface at a point.
 
@@ -112,22 +159,7 @@ def shape_operator(g, hess):
     s11 = np.sum(t1 * h1) / gn
     s12 = 0.5 * (np.sum(t1 * h2) + np.sum(t2 * h1)) / gn
     s22 = np.sum(t2 * h2) / gn
-    half_tr = 0.5 * (s11 + s22)
-    rad = np.sqrt(0.25 * (s11 - s22) ** 2 + s12 * s12)
-    k1 = half_tr + rad
-    k2 = half_tr - rad
-    # Eigenvector of k1 in the (t1, t2) basis; pick the better-conditioned of two formulas.
-    if s11 >= s22:
-        e1 = k1 - s22
-        e2 = s12
-    else:
-        e1 = s12
-        e2 = k1 - s11
-    en = np.sqrt(e1 * e1 + e2 * e2)
-    if en > 0.0:
-        d1 = (e1 * t1 + e2 * t2) / en
-    else:  # umbilic: any tangent direction is principal
-        d1 = t1.copy()
+    k1, k2, d1 = tangent_eigen(s11, s12, s22, t1, t2)
     d2 = np.cross(n, d1)
     return k1, k2, n, d1, d2
 
