@@ -44,7 +44,8 @@ def timed(fn, repeat: int) -> tuple[float, list[float]]:
 
 def bench_estimate(points, repeat, workers):
     rows = []
-    configs = [("knn", "monge", {}), ("knn", "implicit", {}),
+    configs = [("auto", None, {}), ("tc", "implicit", {"preset": "paper"}),
+               ("knn", "monge", {}), ("knn", "implicit", {}),
                ("knn", "implicit", {"solver": "algebraic"}), ("knn", "nfr", {"k": 384})]
     for method in ("tc", "egg", "mesh"):
         if method in curvature.FINDERS:
@@ -59,14 +60,24 @@ def bench_estimate(points, repeat, workers):
         first, runs = timed(run, repeat)
         steady = stages[1:]
         rows.append({
-            "what": f"estimate {method} {fit}" + (f" {extra}" if extra else ""),
+            "what": f"estimate {method} {fit or ''}" + (f" {extra}" if extra else ""),
             "first_s": first, "median_s": statistics.median(runs), "runs": runs,
-            **{f"{k}_s": statistics.median(s[k] for s in steady)
-               for k in ("neighbors", "fit", "orientation")},
+            "stages": {k: statistics.median(s[k] for s in steady)
+                       for k in steady[0] if k != "total"},
         })
     return rows
 
 
+def speed_ratios(rows) -> list[str]:
+    """The default estimator's median time against Territory Claiming's, same run."""
+    by = {r["what"].strip(): r["median_s"] for r in rows}
+    auto = by.get("estimate auto")
+    lines = []
+    for ref in ("estimate tc implicit {'preset': 'paper'}", "estimate tc monge",
+                "neighbors tc"):
+        if auto and by.get(ref):
+            lines.append(f"default (auto) / {ref}: {auto / by[ref]:.2f}x")
+    return lines
 def bench_neighbors(points, repeat, workers):
     rows = []
     for method in sorted(curvature.FINDERS):
@@ -93,6 +104,7 @@ def memory_child(path: str, method: str, fit: str) -> None:
     """
     pts = np.load(path)
     n = len(pts)
+    fit = None if fit == "-" else fit
     curvature.estimate(pts[:2000], method, fit=fit)  # compile outside the measurement
     base = current_rss()
     t = time.perf_counter()
@@ -124,21 +136,21 @@ def main() -> None:
           f"{os.cpu_count()} cores, median of {args.repeat} runs (first call apart)")
     rows = bench_neighbors(cloud.points, args.repeat, args.workers)
     rows += bench_estimate(cloud.points, args.repeat, args.workers)
-    print(f"{'what':44} {'first':>8} {'median':>8} {'nbrs':>7} {'fit':>7} {'orient':>7}")
+    print(f"{'what':52} {'first':>8} {'median':>8}  stages (median s)")
     for r in rows:
-        extra = "".join(f" {r[k]:7.3f}" for k in ("neighbors_s", "fit_s", "orientation_s")
-                        if k in r)
+        stages = "  ".join(f"{k} {v:.3f}" for k, v in r.get("stages", {}).items())
         size = f"  mean size {r['mean_size']:.1f}" if "mean_size" in r else ""
-        print(f"{r['what']:44} {r['first_s']:8.3f} {r['median_s']:8.3f}{extra}{size}")
+        print(f"{r['what']:52} {r['first_s']:8.3f} {r['median_s']:8.3f}  {stages}{size}")
+    print("\n".join(speed_ratios(rows)))
     if args.million:
         with tempfile.TemporaryDirectory() as tmp:
             path = os.path.join(tmp, "cloud.npy")
             np.save(path, synthetic.torus(1_000_000, noise=args.noise, seed=3).points)
-            for fit in ("monge", "implicit"):
-                out = subprocess.run([sys.executable, __file__, "--memory-child", path, "knn",
+            for method, fit in (("auto", "-"), ("knn", "monge"), ("knn", "implicit")):
+                out = subprocess.run([sys.executable, __file__, "--memory-child", path, method,
                                       fit], capture_output=True, text=True, check=True)
                 m = json.loads(out.stdout)
-                print(f"1M points knn {fit}: {m['seconds']:.2f} s, peak memory growth "
+                print(f"1M points {method} {fit}: {m['seconds']:.2f} s, peak memory growth "
                       f"{m['peak_growth_bytes_per_point']:.0f} B/point, whole process "
                       f"{m['peak_total_bytes_per_point']:.0f} B/point (result arrays "
                       f"{m['result_bytes_per_point']:.0f} B/point)")

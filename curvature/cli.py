@@ -1,54 +1,80 @@
-"""Command line: ``curvature estimate|info|neighbors|bench``."""
+"""Command line: ``curvature estimate|info|neighbors|bench``, plus plugin sub-commands.
+
+Plugins are functions ``register(subparsers)`` found in the ``curvature.cli`` entry-point
+group (e.g. ``curvature remote`` from ``curvature_client``); the core never imports them by
+name.
+"""
 
 from __future__ import annotations
 
 import argparse
 import sys
 import time
+from importlib.metadata import entry_points
 from pathlib import Path
 
 import numpy as np
 
+from .auto import AUTO_PARAMS
 from .errors import CurvatureInputError
-from .fitting import FITS, SOLVERS
+from .fitting import FIT_PARAMS, FITS, SOLVERS
 from .io import read, write
 from .neighborhoods import FINDERS, make_finder
-from .pipeline import ORIENTATIONS, estimate
+from .pipeline import DEFAULT_METHOD, ORIENTATIONS, PRESETS, estimate
+from .preview import FIELDS as PREVIEW_FIELDS
+from .preview import VIEWS as PREVIEW_VIEWS
+from .preview import check_available as check_preview_available
+from .preview import render_preview
 from .progress import ProgressBar
 from .validation import as_points
 
 
-def method_param_specs() -> dict:
+def method_specs(with_auto: bool) -> dict:
+    """Parameter specs of every method: the neighborhood methods, plus "auto" if asked."""
+    specs = {name: finder.PARAMS for name, finder in sorted(FINDERS.items())}
+    return {"auto": AUTO_PARAMS, **specs} if with_auto else specs
+
+
+def method_param_specs(with_auto: bool = False) -> dict:
     """Every method parameter by name (the union over methods), for CLI options."""
     specs = {}
-    for finder in FINDERS.values():
-        for spec in finder.PARAMS:
+    for params in method_specs(with_auto).values():
+        for spec in params:
             specs.setdefault(spec.name, spec)
     return specs
 
 
-def add_method_options(parser: argparse.ArgumentParser) -> None:
+def add_method_options(parser: argparse.ArgumentParser, with_auto: bool = False) -> None:
     """``--method`` and one option per method parameter (defaults shown per method)."""
-    parser.add_argument("--method", default="knn", choices=sorted(FINDERS),
-                        help="neighborhood method (default: knn)")
-    for name, spec in method_param_specs().items():
-        owners = [m for m, f in sorted(FINDERS.items()) if any(s.name == name for s in f.PARAMS)]
-        defaults = ", ".join(
-            f"{m}: {next(s.default for s in FINDERS[m].PARAMS if s.name == name)}"
-            for m in owners)
+    methods = method_specs(with_auto)
+    default = DEFAULT_METHOD if with_auto else "knn"
+    parser.add_argument("--method", default=None, choices=sorted(methods),
+                        help=f"method (default: {default}"
+                             + ("; 'auto' measures noise and spacing and picks model and scale"
+                                if with_auto else "") + ")")
+    parser.set_defaults(default_method=default, with_auto=with_auto)
+    for name, spec in method_param_specs(with_auto).items():
+        defaults = ", ".join(f"{m}: {next(s.default for s in ps if s.name == name)}"
+                             for m, ps in methods.items() if any(s.name == name for s in ps))
         parser.add_argument(f"--{name.replace('_', '-')}", dest=name, type=spec.kind,
                             default=None, help=f"{spec.help} [{defaults}]")
 
 
-def chosen_method_params(args) -> dict:
-    """Method parameters given on the command line; reject those of another method."""
-    own = {s.name for s in FINDERS[args.method].PARAMS}
-    given = {name: getattr(args, name) for name in method_param_specs()
+def chosen_method_params(args, method: str | None = None) -> dict:
+    """Method parameters given on the command line; reject those of another method.
+
+    Fit parameters that share a name with a method parameter (``normal_k`` of fit "nfr")
+    are let through for the fit to check.
+    """
+    method = method or args.method or args.default_method
+    own = {s.name for s in method_specs(args.with_auto)[method]}
+    own |= {s.name for s in FIT_PARAMS} if method != "auto" else set()
+    given = {name: getattr(args, name) for name in method_param_specs(args.with_auto)
              if getattr(args, name) is not None}
     foreign = sorted(set(given) - own)
     if foreign:
         opts = ", ".join("--" + f.replace("_", "-") for f in foreign)
-        raise CurvatureInputError(f"{opts} does not apply to method '{args.method}'")
+        raise CurvatureInputError(f"{opts} does not apply to method '{method}'")
     return given
 
 
@@ -62,8 +88,12 @@ def build_parser() -> argparse.ArgumentParser:
                                    "obj, stl, off)")
     est.add_argument("-o", "--output", required=True,
                      help="result file (ply, csv, npz, json by extension)")
-    add_method_options(est)
-    est.add_argument("--fit", default="implicit", choices=FITS, help="fit model")
+    add_method_options(est, with_auto=True)
+    est.add_argument("--preset", default=None, choices=sorted(PRESETS),
+                     help="named configuration: 'paper' is Territory Claiming with 10 neighbors "
+                          "and the implicit quadric")
+    est.add_argument("--fit", default=None, choices=FITS,
+                     help="fit model of a neighborhood method (default: implicit)")
     est.add_argument("--solver", default=None, choices=SOLVERS,
                      help="implicit quadric solver (default taubin)")
     est.add_argument("--orientation", default=None, choices=ORIENTATIONS,
@@ -73,6 +103,13 @@ def build_parser() -> argparse.ArgumentParser:
     est.add_argument("--workers", type=int, default=None, help="threads (default: all cores)")
     est.add_argument("--ascii", action="store_true", help="write ascii PLY instead of binary")
     est.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
+    est.add_argument("--preview", metavar="PNG", default=None,
+                     help="also write a picture of the cloud colored by curvature "
+                          "(needs matplotlib)")
+    est.add_argument("--preview-field", default="mean", choices=list(PREVIEW_FIELDS),
+                     help="field that colors the preview (default: mean)")
+    est.add_argument("--preview-view", default="iso", choices=sorted(PREVIEW_VIEWS),
+                     help="camera of the preview, z up (default: iso)")
 
     sub.add_parser("synthetic", add_help=False,
                    help="sample an analytic test shape with exact curvature "
@@ -87,8 +124,10 @@ def build_parser() -> argparse.ArgumentParser:
     add_method_options(nb)
 
     bench = sub.add_parser("bench", help="regenerate a benchmark study (CSV and PNG plots)")
-    bench.add_argument("study", choices=["paper"],
-                       help="paper: the accuracy study of Khameneifar & Feng (2019)")
+    bench.add_argument("study", choices=["paper", "accuracy"],
+                       help="paper: the accuracy study of Khameneifar & Feng (2019); "
+                            "accuracy: the default estimator against issue 6's targets, beside "
+                            "the paper preset and APSS (when pymeshlab is installed)")
     bench.add_argument("--out", required=True, help="output folder")
     bench.add_argument("--quick", action="store_true", help="reduced grid (about a minute)")
     bench.add_argument("--seeds", type=int, default=None,
@@ -98,7 +137,40 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--data", default=None,
                        help="folder holding bun000.ply (default: ../shared/data next to the "
                             "repository)")
+    bench.add_argument("--no-apss", action="store_true",
+                       help="accuracy: leave MeshLab's APSS out even if pymeshlab is installed")
+    add_plugins(sub)
     return parser
+
+
+PLUGIN_GROUP = "curvature.cli"
+
+
+def add_plugins(sub) -> None:
+    """Sub-commands of the installed plugins (entry points of :data:`PLUGIN_GROUP`).
+
+    Each entry point names a function ``register(subparsers)`` that adds its parsers and sets
+    a ``handler(args) -> int`` default. A plugin that fails to load still gets a command,
+    which explains why it is unavailable instead of breaking every other command.
+    """
+    for ep in sorted(entry_points(group=PLUGIN_GROUP), key=lambda e: e.name):
+        try:
+            register = ep.load()
+        except Exception as exc:  # e.g. the plugin's own dependencies are not installed
+            _add_unavailable(sub, ep.name, f"{type(exc).__name__}: {exc}")
+            continue
+        register(sub)
+
+
+def _add_unavailable(sub, name: str, reason: str) -> None:
+    def handler(args) -> int:
+        print(f"curvature {name}: unavailable: the plugin failed to load ({reason})",
+              file=sys.stderr)
+        return 2
+
+    parser = sub.add_parser(name, help=f"(unavailable: {reason})", add_help=False)
+    parser.add_argument("rest", nargs=argparse.REMAINDER)
+    parser.set_defaults(handler=handler)
 
 
 def percentiles(values: np.ndarray) -> str:
@@ -110,20 +182,33 @@ def percentiles(values: np.ndarray) -> str:
 
 
 def cmd_estimate(args) -> int:
+    if args.preview:  # fail before a long estimate, not after it
+        try:
+            check_preview_available()
+        except ImportError as exc:
+            raise CurvatureInputError(f"--preview: {exc}") from None
     t0 = time.perf_counter()
     cloud = read(args.input)
     t_read = time.perf_counter() - t0
-    params = chosen_method_params(args)
+    method = args.method
+    if method is None:
+        method = PRESETS[args.preset]["method"] if args.preset else args.default_method
+    params = chosen_method_params(args, method)
     if args.solver is not None:
         params["solver"] = args.solver
     bar = None if args.quiet else ProgressBar("estimate")
     t1 = time.perf_counter()
-    res = estimate(cloud, args.method, fit=args.fit, orientation=args.orientation,
+    res = estimate(cloud, method, fit=args.fit, preset=args.preset, orientation=args.orientation,
                    viewpoint=args.viewpoint, workers=args.workers, progress=bar, **params)
     t_est = time.perf_counter() - t1
     t2 = time.perf_counter()
     write(args.output, res, binary=not args.ascii)
     t_write = time.perf_counter() - t2
+    t_preview = None
+    if args.preview:
+        t3 = time.perf_counter()
+        render_preview(res, args.preview_field, view=args.preview_view, path=args.preview)
+        t_preview = time.perf_counter() - t3
     if not args.quiet:
         n = len(res)
         counts = res.status_counts()
@@ -133,6 +218,9 @@ def cmd_estimate(args) -> int:
                                   if cloud.dropped else ""),
             f"method      {res.info['method']} {res.info['params']}  fit {res.info['fit']}  "
             f"orientation {res.info['orientation']}",
+            *([f"measured    spacing {plan['spacing']:.4g}, relative noise {plan['noise']:.4g}"
+               f" -> {'clean: implicit quadric' if plan['clean'] else 'noisy: normal-field'}"
+               f" regression"] if (plan := res.info.get("plan")) else []),
             f"ok          {counts.get('ok', 0)} ({counts.get('ok', 0) / n:.2%})",
             f"failures    {failed if failed else 'none'}",
             f"k1          {percentiles(res.k1)}",
@@ -141,6 +229,9 @@ def cmd_estimate(args) -> int:
             f"({n / max(t_est, 1e-9):,.0f} points/s)",
             f"output      {args.output}",
         ]
+        if t_preview is not None:
+            lines.append(f"preview     {args.preview} ({args.preview_field}, "
+                         f"{args.preview_view} view, {t_preview:.2f}s)")
         print("\n".join(lines), file=sys.stderr)
     return 0
 
@@ -173,11 +264,12 @@ def cmd_neighbors(args) -> int:
     pts = as_points(cloud.points)
     if not 0 <= args.index < len(pts):
         raise CurvatureInputError(f"--index {args.index} is outside 0..{len(pts) - 1}")
-    finder = make_finder(pts, args.method, faces=cloud.faces, **chosen_method_params(args))
+    method = args.method or args.default_method
+    finder = make_finder(pts, method, faces=cloud.faces, **chosen_method_params(args))
     nbhd = finder.query(np.array([args.index], np.int64))
     idx = nbhd[0]
     p = pts[args.index]
-    print(f"point {args.index} at {np.array2string(p, precision=6)}; method {args.method} "
+    print(f"point {args.index} at {np.array2string(p, precision=6)}; method {method} "
           f"{finder.params}; {len(idx)} neighbors")
     print(f"{'rank':>4} {'index':>9} {'distance':>12}   x y z")
     for rank, j in enumerate(idx):
@@ -192,6 +284,8 @@ def cmd_bench(args) -> int:
 
     if args.seeds is not None and args.seeds < 1:
         raise CurvatureInputError(f"--seeds must be >= 1, got {args.seeds}")
+    if args.study == "accuracy":
+        return bench_accuracy(args)
     data = Path(args.data) if args.data else paper_study.default_data_dir()
     scan = data / paper_study.SCAN_NAME
     if not scan.is_file():
@@ -206,6 +300,20 @@ def cmd_bench(args) -> int:
     return 0
 
 
+def bench_accuracy(args) -> int:
+    from . import accuracy_study
+
+    changes = {"workers": args.workers}
+    if args.seeds is not None:
+        changes["seeds"] = tuple(range(1, args.seeds + 1))
+    if args.no_apss:
+        changes["estimators"] = ("default", "paper")
+    config = (accuracy_study.AccuracyConfig.quick if args.quick
+              else accuracy_study.AccuracyConfig.full)(**changes)
+    accuracy_study.run_accuracy(config, args.out)
+    return 0
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["synthetic"]:  # its own parser lives with the shapes
@@ -217,7 +325,8 @@ def main(argv=None) -> int:
     commands = {"estimate": cmd_estimate, "info": cmd_info, "neighbors": cmd_neighbors,
                 "bench": cmd_bench}
     try:
-        return commands[args.command](args)
+        handler = getattr(args, "handler", None) or commands[args.command]
+        return handler(args)
     except (ValueError, OSError) as exc:  # CurvatureInputError and friends are ValueErrors
         print(f"curvature {args.command}: error: {exc}", file=sys.stderr)
         return 2

@@ -10,14 +10,17 @@ import os
 import time
 from collections.abc import Callable
 from contextlib import contextmanager
+from dataclasses import dataclass
 
 import numba
 import numpy as np
 
+from .auto import AUTO_PARAMS, AutoRun
 from .cloud import PointCloud
 from .errors import ParameterError
 from .fitting import FIT_PARAMS, FITS, fit_neighborhoods, resolve_fit, stage1_normals
-from .neighborhoods import make_finder
+from .neighborhoods import FINDERS, make_finder
+from .neighborhoods.kdtree import build_tree, knn_parallel
 from .orientation import (
     ORIENT_K,
     apply_signs,
@@ -26,12 +29,22 @@ from .orientation import (
     signs_from_normals,
     signs_from_viewpoint,
 )
+from .params import resolve_params
 from .result import CurvatureResult
 from .spatial_order import inverse_permutation, morton_order
 from .validation import as_faces, as_points, as_vectors
 
 ORIENTATIONS = ("auto", "normals", "viewpoint")
+DEFAULT_METHOD = "auto"
+#: Named configurations: ``estimate(points, preset="paper")``.
+PRESETS = {
+    # The paper's own setting: Territory Claiming grown to 10 neighbors, implicit quadric.
+    "paper": {"method": "tc", "fit": "implicit", "min_neighbors": 10},
+}
 DEFAULT_CHUNK = 32768
+# Clouds above this many points are processed tile by tile (tile_points=None).
+AUTO_TILE_POINTS = 2_000_000
+MIN_TILE_POINTS = 1000
 ProgressFn = Callable[[int, int], None]
 
 
@@ -92,23 +105,51 @@ def split_params(params: dict) -> tuple[dict, dict]:
     return fit_params, method_params
 
 
-def estimate(points, method: str = "knn", *, fit: str = "implicit", orientation=None,
-             normals=None, viewpoint=None, faces=None, workers=None,
+def apply_preset(preset, method, fit, params: dict) -> tuple[str, str | None, dict]:
+    """Method, fit and parameters after a named preset; explicit arguments must agree with it.
+
+    Parameters given beside the preset override the preset's own values.
+    """
+    if preset is None:
+        return (DEFAULT_METHOD if method is None else method), fit, params
+    if preset not in PRESETS:
+        raise ParameterError(f"unknown preset {preset!r}; choose one of {sorted(PRESETS)}")
+    conf = dict(PRESETS[preset])
+    p_method, p_fit = conf.pop("method"), conf.pop("fit")
+    for name, given, wanted in (("method", method, p_method), ("fit", fit, p_fit)):
+        if given is not None and given != wanted:
+            raise ParameterError(
+                f"preset {preset!r} uses {name} {wanted!r}; {name} {given!r} contradicts it")
+    return p_method, p_fit, {**conf, **params}
+
+
+METHODS = ("auto", *FINDERS)
+
+
+def estimate(points, method: str | None = None, *, fit: str | None = None, preset=None,
+             orientation=None, normals=None, viewpoint=None, faces=None, workers=None,
              progress: ProgressFn | None = None, chunk_size: int = DEFAULT_CHUNK,
-             **params) -> CurvatureResult:
-    """Per-point curvature of a cloud by local quadric fitting.
+             tile_points: int | None = None, **params) -> CurvatureResult:
+    """Per-point curvature of a cloud by local surface fitting.
 
     Parameters
     ----------
     points : array_like, shape (n, 3), or PointCloud
         Coordinates. A PointCloud also supplies normals and faces unless given here.
-    method : {"knn", "tc", "egg", "mesh"}
-        Neighborhood method (DESIGN.md 4.1-4.4); its parameters go in ``**params``.
-    fit : {"implicit", "monge", "nfr"}
-        Fit model (DESIGN.md 4.5). ``solver="taubin"|"algebraic"`` selects the implicit solver.
-        "nfr" (normal-field regression) regresses PCA normals (``normal_k`` neighbors) on
-        position over the neighborhood; it is made for large neighborhoods on noisy data
-        (e.g. ``k=384``; docs/research/issue6.md).
+    method : {"auto", "knn", "tc", "egg", "mesh"}, optional
+        "auto" (the default) measures the cloud's noise and spacing and picks model and scale
+        itself (:mod:`curvature.auto`; parameters ``k``, ``normal_k``, ``noise_threshold``).
+        The others are the neighborhood methods of DESIGN.md 4.1-4.4; their parameters go in
+        ``**params``.
+    fit : {"implicit", "monge", "nfr"}, optional
+        Fit model of the neighborhood methods (DESIGN.md 4.5; default "implicit").
+        ``solver="taubin"|"algebraic"`` selects the implicit solver. "nfr" (normal-field
+        regression) regresses PCA normals (``normal_k`` neighbors) on position over the
+        neighborhood; it is made for large neighborhoods on noisy data. Method "auto" chooses
+        its own fit and takes none.
+    preset : {"paper"}, optional
+        A named configuration: "paper" is the paper's Territory Claiming with 10 neighbors and
+        the implicit quadric. Parameters given beside it override its values.
     orientation : {"auto", "normals", "viewpoint"}, optional
         How normal signs are fixed; by default "normals" when normals are given, "viewpoint"
         when a viewpoint is given, else "auto".
@@ -121,10 +162,15 @@ def estimate(points, method: str = "knn", *, fit: str = "implicit", orientation=
     workers : int, optional
         Threads to use (default: all cores). Results are identical for any value.
     progress : callable, optional
-        ``progress(done, total)`` after each chunk of fitted points. An exception raised by it
-        aborts the run (used for cancellation).
+        ``progress(done, total)`` after each chunk of work. An exception raised by it aborts
+        the run (used for cancellation).
     chunk_size : int
         Query points per chunk.
+    tile_points : int, optional
+        Split the cloud into spatial tiles of about this many points, each computed with a
+        halo that is checked to hold everything its points depend on (:mod:`curvature.tiling`);
+        results are identical to an untiled run. Default: tiles of 2M points above 2M points;
+        0 never tiles.
     **params
         Method parameters (e.g. ``k=24`` for knn) and fit parameters (``solver``,
         ``include_self``).
@@ -132,13 +178,15 @@ def estimate(points, method: str = "knn", *, fit: str = "implicit", orientation=
     Returns
     -------
     CurvatureResult
+        ``info`` records the method, parameters, fit, timings and, for "auto", the measured
+        plan (spacing, relative noise, the branch taken).
 
     Raises
     ------
     CurvatureInputError
         Bad cloud (shape, empty, fewer than 10 points, NaN/Inf) or bad normals/faces.
     ParameterError
-        Unknown method, fit, orientation or parameter, or a value out of bounds.
+        Unknown method, fit, preset, orientation or parameter, or a value out of bounds.
     """
     t_start = time.perf_counter()
     if isinstance(points, PointCloud):
@@ -150,12 +198,9 @@ def estimate(points, method: str = "knn", *, fit: str = "implicit", orientation=
     ref_normals = None if normals is None else as_vectors(normals, n, "normals")
     tri = as_faces(faces, n)
     vp = check_viewpoint(viewpoint)
-    mode = resolve_orientation(orientation, ref_normals, vp)
-    fit_params, method_params = split_params(params)
-    fit_opts = resolve_fit(fit, fit_params)
-    nthreads = resolve_workers(workers)
-    if isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size < 1:
-        raise ParameterError(f"chunk_size must be a whole number >= 1, got {chunk_size!r}")
+    req = resolve_request(preset, method, fit, params, orientation, ref_normals, vp, workers,
+                          chunk_size)
+    tiles = resolve_tile_points(tile_points, n)
 
     # Work on a Z-ordered copy so neighbor reads stay local; every per-point computation is
     # unchanged, and the outputs are put back in input order at the end.
@@ -164,51 +209,245 @@ def estimate(points, method: str = "knn", *, fit: str = "implicit", orientation=
     spts = np.ascontiguousarray(pts[order])
     s_normals = None if ref_normals is None else ref_normals[order]
     s_faces = None if tri is None else inv[tri]
-    finder = make_finder(spts, method, faces=s_faces, **method_params)
-    res = empty_result(spts, s_faces)
-    stage1 = None
-    # The first neighbors of each point, kept for the orientation graph (32 bytes a point).
-    graph = np.empty((n, ORIENT_K), np.int32) if mode == "auto" else None
-    timings = {"neighbors": 0.0, "fit": 0.0, "orientation": 0.0}
-    with numba_threads(nthreads):
-        if fit == "nfr":
-            t0 = time.perf_counter()
-            stage1 = stage1_normals(spts, make_finder(spts, "knn", k=fit_opts["normal_k"]),
-                                    chunk_size, nthreads)
-            timings["stage1_normals"] = time.perf_counter() - t0
-        for start in range(0, n, chunk_size):
-            stop = min(start + chunk_size, n)
-            query = np.arange(start, stop, dtype=np.int64)
-            t0 = time.perf_counter()
-            nbhd = finder.query(query, workers=nthreads)
-            t1 = time.perf_counter()
-            out = fit_neighborhoods(spts, query, nbhd, fit, fit_opts["solver"],
-                                    fit_opts["include_self"], stage1)
-            timings["neighbors"] += t1 - t0
-            timings["fit"] += time.perf_counter() - t1
-            sl = slice(start, stop)
-            res.k1[sl], res.k2[sl], res.residual[sl], res.status[sl] = \
-                out.k1, out.k2, out.residual, out.status
-            res.normals[sl], res.dir1[sl], res.dir2[sl] = out.normals, out.dir1, out.dir2
-            res.neighbor_count[sl] = nbhd.sizes()
-            if graph is not None:
-                graph[sl] = first_neighbors(nbhd)
-            if progress is not None:
-                progress(stop, n)
+    del order
+    with numba_threads(req.workers):
+        if tiles is None:
+            block = compute_block(spts, s_faces, req, progress=progress)
+            res, graph, info, timings = block.result, block.graph, block.info, block.timings
+        else:
+            from .tiling import run_tiled
+
+            res, graph, info, timings = run_tiled(spts, s_faces, req, tiles, progress)
         t0 = time.perf_counter()
-        orient(res, mode, s_normals, vp, graph)
+        orient(res, req.mode, s_normals, vp, graph)
         timings["orientation"] = time.perf_counter() - t0
+    del graph
     res = unpermute(res, inv, pts, tri)
     res.mean[:] = 0.5 * (res.k1 + res.k2)
     res.gaussian[:] = res.k1 * res.k2
     timings["total"] = time.perf_counter() - t_start
     res.info = {
-        "method": method, "params": dict(finder.params), "fit": fit, **fit_opts,
-        "orientation": mode, "workers": nthreads, "points": n,
+        **info, "preset": preset, "orientation": req.mode, "workers": req.workers, "points": n,
         "faces": 0 if tri is None else int(tri.shape[0]),
         "status_counts": res.status_counts(), "timings": timings,
     }
     return res
+
+
+@dataclass(frozen=True)
+class Request:
+    """Everything ``estimate`` was asked for, checked (picklable: tiles travel with it)."""
+
+    method: str
+    fit: str | None
+    fit_opts: dict
+    method_params: dict
+    auto_params: dict
+    mode: str
+    workers: int
+    chunk_size: int
+
+
+def resolve_request(preset, method, fit, params, orientation, ref_normals, viewpoint, workers,
+                    chunk_size) -> Request:
+    """Check method, fit, parameters, orientation, workers and chunk size."""
+    method, fit, params = apply_preset(preset, method, fit, params)
+    if method not in METHODS:
+        raise ParameterError(f"unknown method {method!r}; choose one of {sorted(METHODS)}")
+    mode = resolve_orientation(orientation, ref_normals, viewpoint)
+    fit_opts, method_params, auto_params = {}, {}, {}
+    if method == "auto":
+        if fit is not None:
+            raise ParameterError(
+                f"method 'auto' chooses its own fit; fit {fit!r} needs a neighborhood method "
+                f"({', '.join(sorted(FINDERS))})")
+        auto_params = resolve_params(AUTO_PARAMS, params, "method 'auto'")
+    else:
+        fit = "implicit" if fit is None else fit
+        fit_params, method_params = split_params(params)
+        fit_opts = resolve_fit(fit, fit_params)
+    nthreads = resolve_workers(workers)
+    if isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size < 1:
+        raise ParameterError(f"chunk_size must be a whole number >= 1, got {chunk_size!r}")
+    return Request(method, fit, fit_opts, method_params, auto_params, mode, nthreads,
+                   chunk_size)
+
+
+def resolve_tile_points(tile_points, n: int) -> int | None:
+    """Core points per tile, or None to run the cloud as one block.
+
+    ``None`` tiles clouds larger than :data:`AUTO_TILE_POINTS`; 0 never tiles.
+    """
+    if tile_points is None:
+        return AUTO_TILE_POINTS if n > AUTO_TILE_POINTS else None
+    if isinstance(tile_points, bool) or not isinstance(tile_points, int | np.integer) \
+            or tile_points < 0:
+        raise ParameterError(f"tile_points must be a whole number >= 0, got {tile_points!r}")
+    if tile_points == 0 or tile_points >= n:
+        return None
+    return max(int(tile_points), MIN_TILE_POINTS)
+
+
+@dataclass
+class Block:
+    """Results of :func:`compute_block` for its query points (rows in query order).
+
+    Attributes
+    ----------
+    result : CurvatureResult
+        Unoriented curvature of the query points (mean and gaussian not yet filled).
+    graph : ndarray, shape (m, ORIENT_K), int32, or None
+        First neighbors of each query point (block indices), for orientation "auto".
+    reach : ndarray, shape (m,), or None
+        With ``track_reach``: a distance from each query point within which lies every point
+        its result depends on.
+    info, timings : dict
+    plan : AutoPlan or None
+    """
+
+    result: CurvatureResult
+    graph: np.ndarray | None
+    reach: np.ndarray | None
+    info: dict
+    timings: dict
+    plan: object = None
+
+
+def compute_block(spts, s_faces, req: Request, query=None, *, progress=None, plan=None,
+                  mesh_graph=None, track_reach: bool = False) -> Block:
+    """Unoriented curvature of ``query`` points of a Z-ordered block of points.
+
+    Parameters
+    ----------
+    spts : ndarray, shape (n, 3)
+        The block's points (a whole cloud, or a tile with its halo), in Z-order.
+    s_faces : ndarray, shape (f, 3), optional
+        Faces in block indices.
+    req : Request
+    query : ndarray, shape (m,), int64, optional
+        Block indices to compute (default: all, in order).
+    progress : callable, optional
+    plan : AutoPlan, optional
+        The whole cloud's plan for method "auto" (measured on the block if not given).
+    mesh_graph : tuple of ndarray, optional
+        The whole cloud's vertex graph restricted to the block, for method "mesh".
+    track_reach : bool
+        Also return each query point's reach (see :class:`Block`).
+    """
+    n = spts.shape[0]
+    query = np.arange(n, dtype=np.int64) if query is None else np.asarray(query, np.int64)
+    want_graph = req.mode == "auto"
+    timings: dict = {}
+    if req.method == "auto":
+        res = empty_result(spts, s_faces)
+        graph = np.empty((n, ORIENT_K), np.int32) if want_graph else None
+        run = AutoRun(spts, req.auto_params, req.chunk_size, progress, plan=plan,
+                      track_reach=track_reach)
+        run.run(res, graph, ORIENT_K)
+        timings.update(run.timings)
+        info = {"method": "auto", "params": req.auto_params,
+                "fit": "implicit" if run.plan.clean else "nfr", "plan": run.plan.to_dict()}
+        if query.shape[0] != n or np.any(query != np.arange(n)):
+            res = select_rows(res, query, spts[query])
+            graph = None if graph is None else graph[query]
+        reach = None if run.reach is None else run.reach[query]
+        return Block(res, graph, reach, info, timings, run.plan)
+    finder = make_finder(spts, req.method, faces=s_faces, **req.method_params)
+    if mesh_graph is not None:
+        finder.use_graph(mesh_graph)
+    res = empty_result(spts[query], None)
+    graph = np.empty((query.shape[0], ORIENT_K), np.int32) if want_graph else None
+    reach = fit_chunks(spts, finder, res, graph, req.fit, req.fit_opts, req.workers,
+                       req.chunk_size, progress, timings, query, track_reach)
+    res.faces = s_faces if query.shape[0] == n else None
+    info = {"method": req.method, "params": dict(finder.params), "fit": req.fit,
+            **req.fit_opts}
+    return Block(res, graph, reach, info, timings)
+
+
+def select_rows(res: CurvatureResult, rows: np.ndarray, points: np.ndarray) -> CurvatureResult:
+    """The result restricted to ``rows``."""
+    return CurvatureResult(points=points, faces=None,
+                           **{name: arr[rows] for name, arr in res.fields().items()})
+
+
+def fit_chunks(spts, finder, res, graph, fit, fit_opts, nthreads, chunk_size, progress,
+               timings, query=None, track_reach: bool = False):
+    """Neighborhoods and fits of a neighborhood method, chunk by chunk, into ``res``.
+
+    ``res`` and ``graph`` rows follow ``query`` (default: every point). Returns each query
+    point's reach when ``track_reach`` (else None).
+    """
+    n = spts.shape[0]
+    query = np.arange(n, dtype=np.int64) if query is None else query
+    m = query.shape[0]
+    stage1 = stage1_radius = None
+    reach = np.empty(m) if track_reach else None
+    timings.update(neighbors=0.0, fit=0.0)
+    if fit == "nfr":
+        t0 = time.perf_counter()
+        stage1 = stage1_normals(spts, make_finder(spts, "knn", k=fit_opts["normal_k"]),
+                                chunk_size, nthreads)
+        if track_reach:
+            stage1_radius = kth_distance(spts, fit_opts["normal_k"])
+        timings["stage1_normals"] = time.perf_counter() - t0
+    extra_k = finder.examined() if track_reach else 0
+    tree = build_tree(spts) if extra_k else None
+    for start in range(0, m, chunk_size):
+        stop = min(start + chunk_size, m)
+        q = query[start:stop]
+        t0 = time.perf_counter()
+        nbhd = finder.query(q, workers=nthreads)
+        t1 = time.perf_counter()
+        out = fit_neighborhoods(spts, q, nbhd, fit, fit_opts["solver"],
+                                fit_opts["include_self"], stage1)
+        timings["neighbors"] += t1 - t0
+        timings["fit"] += time.perf_counter() - t1
+        sl = slice(start, stop)
+        res.k1[sl], res.k2[sl], res.residual[sl], res.status[sl] = \
+            out.k1, out.k2, out.residual, out.status
+        res.normals[sl], res.dir1[sl], res.dir2[sl] = out.normals, out.dir1, out.dir2
+        res.neighbor_count[sl] = nbhd.sizes()
+        if graph is not None:
+            graph[sl] = first_neighbors(nbhd)
+        if reach is not None:
+            reach[sl] = neighborhood_reach(spts, q, nbhd, stage1_radius)
+            if extra_k:  # candidate-based methods examine more points than they keep
+                reach[sl] = np.maximum(reach[sl], kth_distance(spts, extra_k, q, tree))
+        if progress is not None:
+            progress(stop, m)
+    return reach
+
+
+def kth_distance(points: np.ndarray, k: int, query=None, tree=None) -> np.ndarray:
+    """Distance of each query point (default: all) to its k-th nearest other point."""
+    n = points.shape[0]
+    query = np.arange(n, dtype=np.int64) if query is None else query
+    k = min(k, n - 1)
+    tree = build_tree(points) if tree is None else tree
+    out = np.empty(query.shape[0])
+    for start in range(0, query.shape[0], DEFAULT_CHUNK):
+        q = query[start:start + DEFAULT_CHUNK]
+        nbr = np.empty((q.shape[0], k), np.int32)
+        d2 = np.empty((q.shape[0], k))
+        knn_parallel(points, tree, q, k, nbr, d2)
+        out[start:start + q.shape[0]] = np.sqrt(d2[:, -1])
+    return out
+
+
+def neighborhood_reach(points, query, nbhd, radius=None) -> np.ndarray:
+    """Largest distance from each query point to a neighbor (plus the neighbor's own
+    ``radius`` when given, and the query point's)."""
+    sizes = nbhd.sizes()
+    rows = np.repeat(np.arange(query.shape[0]), sizes)
+    d = np.linalg.norm(points[nbhd.indices] - points[query[rows]], axis=1)
+    if radius is not None:
+        d += radius[nbhd.indices]
+    out = np.zeros(query.shape[0])
+    np.maximum.at(out, rows, d)
+    if radius is not None:
+        out = np.maximum(out, radius[query])
+    return out
 
 
 def empty_result(pts: np.ndarray, faces) -> CurvatureResult:
@@ -222,8 +461,14 @@ def empty_result(pts: np.ndarray, faces) -> CurvatureResult:
 
 
 def unpermute(res: CurvatureResult, inv: np.ndarray, pts: np.ndarray, faces) -> CurvatureResult:
-    """The result of the Z-ordered cloud in input order (``inv`` from inverse_permutation)."""
-    fields = {name: arr[inv] for name, arr in res.fields().items()}
+    """The result of the Z-ordered cloud in input order (``inv`` from inverse_permutation).
+
+    Fields are reordered one at a time, so at most one extra field is held at once.
+    """
+    fields = res.fields()
+    for name in list(fields):
+        fields[name] = fields[name][inv]
+        setattr(res, name, fields[name])
     return CurvatureResult(points=pts, faces=faces, **fields)
 
 
@@ -241,4 +486,4 @@ def orient(res: CurvatureResult, mode: str, ref_normals, viewpoint, graph) -> No
     apply_signs(signs, res.k1, res.k2, res.normals, res.dir1, res.dir2)
 
 
-__all__ = ["FITS", "ORIENTATIONS", "estimate"]
+__all__ = ["FITS", "METHODS", "ORIENTATIONS", "PRESETS", "estimate"]

@@ -69,6 +69,188 @@ def _terms(u1, u2, row):
     row[9] = u2 * u2 * u2
 
 
+@njit(cache=True)
+def _d_terms(u1, u2, d1, d2):
+    """Derivatives of :func:`_terms` with respect to u1 (into ``d1``) and u2 (``d2``)."""
+    d1[0] = 0.0
+    d1[1] = 1.0
+    d1[2] = 0.0
+    d1[3] = 2.0 * u1
+    d1[4] = u2
+    d1[5] = 0.0
+    d1[6] = 3.0 * u1 * u1
+    d1[7] = 2.0 * u1 * u2
+    d1[8] = u2 * u2
+    d1[9] = 0.0
+    d2[0] = 0.0
+    d2[1] = 0.0
+    d2[2] = 1.0
+    d2[3] = 0.0
+    d2[4] = u1
+    d2[5] = 2.0 * u2
+    d2[6] = 0.0
+    d2[7] = u1 * u1
+    d2[8] = 2.0 * u1 * u2
+    d2[9] = 3.0 * u2 * u2
+
+
+@njit(cache=True)
+def regress_normals(points, field, p, nbr, include_self, coef):
+    """Cubic regression of the neighbors' normals on their tangent positions around ``p``.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+    field : ndarray, shape (n, 3)
+        Unit normals of every point (sign arbitrary, NaN where unknown).
+    p : int
+        The fit's centre; its tangent frame is that of ``field[p]``.
+    nbr : ndarray, shape (k,)
+        Neighbors of p (p itself not listed).
+    include_self : bool
+        Whether p takes part in the fit.
+    coef : ndarray, shape (2, N_TERMS)
+        Output: coefficients of the two tangent normal components in the monomials of
+        ``u / h`` (:func:`_terms`).
+
+    Returns
+    -------
+    status : int
+        OK, TOO_FEW or DEGENERATE.
+    h : float
+        RMS tangent distance of the fitted points (the monomials' unit).
+    t1, t2 : ndarray, shape (3,)
+        Tangent frame of ``field[p]``.
+    residual : float
+        RMS height of the fitted points above the osculating paraboloid of the fitted shape
+        operator.
+    """
+    m = nbr.shape[0] + (1 if include_self else 0)
+    n_p = field[p]
+    t1, t2 = tangent_basis(np.array([1.0, 0.0, 0.0]))
+    if m < MIN_POINTS_NFR:
+        return TOO_FEW, 0.0, t1, t2, np.nan
+    if not np.all(np.isfinite(n_p)):
+        return DEGENERATE, 0.0, t1, t2, np.nan
+    t1, t2 = tangent_basis(n_p)
+    # Tangent coordinates, tangent normal components (neighbor normals flipped to agree with
+    # p's) and heights of the fitted points; p itself is row 0 when included.
+    uv = np.empty((m, 2))
+    g = np.empty((m, 2))
+    hgt = np.empty(m)
+    row = np.empty(N_TERMS)
+    ok_pts = 0
+    # Scalars throughout: this loop runs a few hundred times per fit and must not allocate.
+    px, py, pz = points[p, 0], points[p, 1], points[p, 2]
+    nx, ny, nz = n_p[0], n_p[1], n_p[2]
+    for i in range(m):
+        q = p if (include_self and i == 0) else nbr[i - (1 if include_self else 0)]
+        qx, qy, qz = field[q, 0], field[q, 1], field[q, 2]
+        if not (np.isfinite(qx) and np.isfinite(qy) and np.isfinite(qz)):
+            continue
+        dx = points[q, 0] - px
+        dy = points[q, 1] - py
+        dz = points[q, 2] - pz
+        s = 1.0 if qx * nx + qy * ny + qz * nz >= 0.0 else -1.0
+        uv[ok_pts, 0] = dx * t1[0] + dy * t1[1] + dz * t1[2]
+        uv[ok_pts, 1] = dx * t2[0] + dy * t2[1] + dz * t2[2]
+        g[ok_pts, 0] = s * (qx * t1[0] + qy * t1[1] + qz * t1[2])
+        g[ok_pts, 1] = s * (qx * t2[0] + qy * t2[1] + qz * t2[2])
+        hgt[ok_pts] = dx * nx + dy * ny + dz * nz
+        ok_pts += 1
+    if ok_pts < MIN_POINTS_NFR:
+        return TOO_FEW, 0.0, t1, t2, np.nan
+    h = np.sqrt(np.sum(uv[:ok_pts] ** 2) / ok_pts)
+    if not h > 0.0:
+        return DEGENERATE, 0.0, t1, t2, np.nan
+    ata = np.zeros((N_TERMS, N_TERMS))
+    atg = np.zeros((N_TERMS, 2))
+    for i in range(ok_pts):
+        _terms(uv[i, 0] / h, uv[i, 1] / h, row)
+        for r in range(N_TERMS):
+            atg[r, 0] += row[r] * g[i, 0]
+            atg[r, 1] += row[r] * g[i, 1]
+            for c in range(r, N_TERMS):
+                ata[r, c] += row[r] * row[c]
+    for r in range(N_TERMS):
+        for c in range(r + 1, N_TERMS):
+            ata[c, r] = ata[r, c]
+    l, good = cholesky(ata, 1e-12)
+    if not good:
+        return DEGENERATE, h, t1, t2, np.nan
+    beta0 = solve_upper_t(l, solve_lower(l, atg[:, 0].copy()))
+    beta1 = solve_upper_t(l, solve_lower(l, atg[:, 1].copy()))
+    for r in range(N_TERMS):
+        coef[0, r] = beta0[r]
+        coef[1, r] = beta1[r]
+    # d(normal_a)/d(u_b) = coef[a, 1 + b] / h at p; heights against the osculating paraboloid
+    # w = w0 - u'Su/2 of its symmetric part (w0 fitted as a mean).
+    s11 = beta0[1] / h
+    s22 = beta1[2] / h
+    s12 = 0.5 * (beta0[2] + beta1[1]) / h
+    off = 0.0
+    for i in range(ok_pts):
+        u1, u2 = uv[i, 0], uv[i, 1]
+        off += hgt[i] + 0.5 * (s11 * u1 * u1 + 2.0 * s12 * u1 * u2 + s22 * u2 * u2)
+    off /= ok_pts
+    ss = 0.0
+    for i in range(ok_pts):
+        u1, u2 = uv[i, 0], uv[i, 1]
+        dev = hgt[i] + 0.5 * (s11 * u1 * u1 + 2.0 * s12 * u1 * u2 + s22 * u2 * u2) - off
+        ss += dev * dev
+    return OK, h, t1, t2, np.sqrt(ss / ok_pts)
+
+
+@njit(cache=True)
+def curvature_from_field(coef, h, n_p, t1, t2, u1, u2, j, k1, k2, normals, dir1, dir2):
+    """Write the curvature of a fitted normal field at tangent position ``(u1, u2)``.
+
+    The field is ``n_p + g1 t1 + g2 t2`` with ``g_a = coef[a] . terms(u / h)``; its shape
+    operator at u is the symmetric part of ``dg/du``.
+
+    Returns
+    -------
+    bool
+        False if the outputs are not finite (they are then left for the caller to clear).
+    """
+    row = np.empty(N_TERMS)
+    d1t = np.empty(N_TERMS)
+    d2t = np.empty(N_TERMS)
+    x1 = u1 / h
+    x2 = u2 / h
+    _terms(x1, x2, row)
+    _d_terms(x1, x2, d1t, d2t)
+    g1 = 0.0
+    g2 = 0.0
+    j11 = 0.0
+    j12 = 0.0
+    j21 = 0.0
+    j22 = 0.0
+    for r in range(N_TERMS):
+        g1 += coef[0, r] * row[r]
+        g2 += coef[1, r] * row[r]
+        j11 += coef[0, r] * d1t[r]
+        j12 += coef[0, r] * d2t[r]
+        j21 += coef[1, r] * d1t[r]
+        j22 += coef[1, r] * d2t[r]
+    c1, c2, d1 = tangent_eigen(j11 / h, 0.5 * (j12 + j21) / h, j22 / h, t1, t2)
+    nn = n_p + g1 * t1 + g2 * t2
+    nn /= np.sqrt(np.sum(nn * nn))
+    d1 = d1 - np.sum(d1 * nn) * nn
+    d1 /= np.sqrt(np.sum(d1 * d1))
+    d2 = np.cross(nn, d1)
+    if not (np.isfinite(c1) and np.isfinite(c2) and np.all(np.isfinite(nn))
+            and np.all(np.isfinite(d1))):
+        return False
+    k1[j] = c1
+    k2[j] = c2
+    for d in range(3):
+        normals[j, d] = nn[d]
+        dir1[j, d] = d1[d]
+        dir2[j, d] = d2[d]
+    return True
+
+
 @njit(parallel=True, cache=True)
 def nfr_batch(points, stage1, query, indptr, indices, include_self,
               k1, k2, normals, dir1, dir2, residual, status):
@@ -88,100 +270,96 @@ def nfr_batch(points, stage1, query, indptr, indices, include_self,
         paraboloid of the estimated shape operator. The normal's sign is the stage-1 normal's.
     """
     for j in prange(query.shape[0]):
-        row = np.empty(N_TERMS)  # per iteration: a buffer shared across threads would race
+        coef = np.empty((2, N_TERMS))  # per iteration: a buffer shared by threads would race
         clear_outputs(j, k1, k2, residual, normals, dir1, dir2)
         p = query[j]
-        nbr = indices[indptr[j]:indptr[j + 1]]
-        m = nbr.shape[0] + (1 if include_self else 0)
-        if m < MIN_POINTS_NFR:
-            status[j] = TOO_FEW
+        st, h, t1, t2, res = regress_normals(points, stage1, p, indices[indptr[j]:indptr[j + 1]],
+                                             include_self, coef)
+        if st != OK:
+            status[j] = st
             continue
-        n_p = stage1[p]
-        if not np.all(np.isfinite(n_p)):
-            status[j] = DEGENERATE
-            continue
-        t1, t2 = tangent_basis(n_p)
-        # Tangent coordinates, tangent normal components (neighbor normals flipped to agree
-        # with p's) and heights of the fitted points; p itself is row 0 when included.
-        uv = np.empty((m, 2))
-        g = np.empty((m, 2))
-        hgt = np.empty(m)
-        ok_pts = 0
-        # Scalars throughout: this loop runs a few hundred times per point and must not
-        # allocate.
-        px, py, pz = points[p, 0], points[p, 1], points[p, 2]
-        nx, ny, nz = n_p[0], n_p[1], n_p[2]
-        for i in range(m):
-            q = p if (include_self and i == 0) else nbr[i - (1 if include_self else 0)]
-            qx, qy, qz = stage1[q, 0], stage1[q, 1], stage1[q, 2]
-            if not (np.isfinite(qx) and np.isfinite(qy) and np.isfinite(qz)):
-                continue
-            dx = points[q, 0] - px
-            dy = points[q, 1] - py
-            dz = points[q, 2] - pz
-            s = 1.0 if qx * nx + qy * ny + qz * nz >= 0.0 else -1.0
-            uv[ok_pts, 0] = dx * t1[0] + dy * t1[1] + dz * t1[2]
-            uv[ok_pts, 1] = dx * t2[0] + dy * t2[1] + dz * t2[2]
-            g[ok_pts, 0] = s * (qx * t1[0] + qy * t1[1] + qz * t1[2])
-            g[ok_pts, 1] = s * (qx * t2[0] + qy * t2[1] + qz * t2[2])
-            hgt[ok_pts] = dx * nx + dy * ny + dz * nz
-            ok_pts += 1
-        if ok_pts < MIN_POINTS_NFR:
-            status[j] = TOO_FEW
-            continue
-        h = np.sqrt(np.sum(uv[:ok_pts] ** 2) / ok_pts)
-        if not h > 0.0:
-            status[j] = DEGENERATE
-            continue
-        ata = np.zeros((N_TERMS, N_TERMS))
-        atg = np.zeros((N_TERMS, 2))
-        for i in range(ok_pts):
-            _terms(uv[i, 0] / h, uv[i, 1] / h, row)
-            for r in range(N_TERMS):
-                atg[r, 0] += row[r] * g[i, 0]
-                atg[r, 1] += row[r] * g[i, 1]
-                for c in range(r, N_TERMS):
-                    ata[r, c] += row[r] * row[c]
-        for r in range(N_TERMS):
-            for c in range(r + 1, N_TERMS):
-                ata[c, r] = ata[r, c]
-        l, good = cholesky(ata, 1e-12)
-        if not good:
-            status[j] = DEGENERATE
-            continue
-        beta0 = solve_upper_t(l, solve_lower(l, atg[:, 0].copy()))
-        beta1 = solve_upper_t(l, solve_lower(l, atg[:, 1].copy()))
-        # d(normal_a)/d(u_b) = beta_a[1 + b] / h; the shape operator is its symmetric part.
-        s11 = beta0[1] / h
-        s22 = beta1[2] / h
-        s12 = 0.5 * (beta0[2] + beta1[1]) / h
-        c1, c2, d1 = tangent_eigen(s11, s12, s22, t1, t2)
-        # The intercepts are the tangent components of the smoothed normal at p.
-        nn = n_p + beta0[0] * t1 + beta1[0] * t2
-        nn /= np.sqrt(np.sum(nn * nn))
-        d1 = d1 - np.sum(d1 * nn) * nn
-        d1 /= np.sqrt(np.sum(d1 * d1))
-        d2 = np.cross(nn, d1)
-        # Heights against the osculating paraboloid w = w0 - u'Su/2 (w0 fitted as a mean).
-        off = 0.0
-        for i in range(ok_pts):
-            u1, u2 = uv[i, 0], uv[i, 1]
-            off += hgt[i] + 0.5 * (s11 * u1 * u1 + 2.0 * s12 * u1 * u2 + s22 * u2 * u2)
-        off /= ok_pts
-        ss = 0.0
-        for i in range(ok_pts):
-            u1, u2 = uv[i, 0], uv[i, 1]
-            dev = hgt[i] + 0.5 * (s11 * u1 * u1 + 2.0 * s12 * u1 * u2 + s22 * u2 * u2) - off
-            ss += dev * dev
-        if not (np.isfinite(c1) and np.isfinite(c2) and np.all(np.isfinite(nn))
-                and np.all(np.isfinite(d1))):
+        if not curvature_from_field(coef, h, stage1[p], t1, t2, 0.0, 0.0, j,
+                                    k1, k2, normals, dir1, dir2):
+            clear_outputs(j, k1, k2, residual, normals, dir1, dir2)
             status[j] = NON_FINITE
             continue
-        k1[j] = c1
-        k2[j] = c2
-        residual[j] = np.sqrt(ss / ok_pts)
+        residual[j] = res
+        status[j] = OK
+
+
+@njit(parallel=True, cache=True)
+def nfr_anchor_fits(points, field, anchors, indptr, indices, coef, scale, frame, residual,
+                    status):
+    """Normal-field regressions at anchor points, kept as coefficients for nearby points.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+    field : ndarray, shape (n, 3)
+        Unit normals of every point (sign arbitrary, NaN where unknown).
+    anchors : ndarray, shape (a,), int64
+        Anchor point indices.
+    indptr, indices : ndarray
+        CSR neighborhoods of the anchors (anchor not listed; it takes part in its fit).
+    coef : ndarray, shape (a, 2, N_TERMS)
+    scale, residual : ndarray, shape (a,)
+    frame : ndarray, shape (a, 3, 3)
+        Outputs: coefficients, monomial unit h, rows (t1, t2, n) of the fit's frame, residual.
+    status : ndarray, shape (a,), int8
+        Output status of each anchor's fit.
+    """
+    for j in prange(anchors.shape[0]):
+        p = anchors[j]
+        st, h, t1, t2, res = regress_normals(points, field, p, indices[indptr[j]:indptr[j + 1]],
+                                             True, coef[j])
+        status[j] = st
+        scale[j] = h
+        residual[j] = res
         for d in range(3):
-            normals[j, d] = nn[d]
-            dir1[j, d] = d1[d]
-            dir2[j, d] = d2[d]
+            frame[j, 0, d] = t1[d]
+            frame[j, 1, d] = t2[d]
+            frame[j, 2, d] = field[p, d]
+
+
+@njit(parallel=True, cache=True)
+def nfr_from_anchors(points, query, owner, anchors, coef, scale, frame, fit_residual,
+                     fit_status, k1, k2, normals, dir1, dir2, residual, status):
+    """Curvature of query points from the fitted normal field of their anchor.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+    query : ndarray, shape (m,), int64
+        Query point indices.
+    owner : ndarray, shape (m,), int64
+        Index into ``anchors`` of each query point's anchor.
+    anchors, coef, scale, frame, fit_residual, fit_status
+        As written by :func:`nfr_anchor_fits`.
+    k1, k2, residual : ndarray, shape (m,)
+    normals, dir1, dir2 : ndarray, shape (m, 3)
+    status : ndarray, shape (m,), int8
+        Outputs as in ``fit_batch``; the residual is the anchor fit's. Normals take the sign of
+        the anchor's frame.
+    """
+    for j in prange(query.shape[0]):
+        clear_outputs(j, k1, k2, residual, normals, dir1, dir2)
+        a = owner[j]
+        if fit_status[a] != OK:
+            status[j] = fit_status[a]
+            continue
+        p = query[j]
+        c = anchors[a]
+        dx = points[p, 0] - points[c, 0]
+        dy = points[p, 1] - points[c, 1]
+        dz = points[p, 2] - points[c, 2]
+        t1 = frame[a, 0]
+        t2 = frame[a, 1]
+        u1 = dx * t1[0] + dy * t1[1] + dz * t1[2]
+        u2 = dx * t2[0] + dy * t2[1] + dz * t2[2]
+        if not curvature_from_field(coef[a], scale[a], frame[a, 2], t1, t2, u1, u2, j,
+                                    k1, k2, normals, dir1, dir2):
+            clear_outputs(j, k1, k2, residual, normals, dir1, dir2)
+            status[j] = NON_FINITE
+            continue
+        residual[j] = fit_residual[a]
         status[j] = OK

@@ -87,6 +87,13 @@ class NeighborFinder(ABC):
             self._tree = cKDTree(self.points, balanced_tree=False, compact_nodes=False)
         return self._tree
 
+    def examined(self) -> int:
+        """How many nearest points a query may examine beyond those it returns (0: none).
+
+        Tiling adds the distance to that many nearest points to a point's reach.
+        """
+        return 0
+
     def validate(self, params: dict) -> None:  # noqa: B027 - optional hook
         """Check constraints between parameters; raise ParameterError on conflict."""
 

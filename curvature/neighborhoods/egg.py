@@ -183,6 +183,10 @@ class EggFinder(TreeMixin, NeighborFinder):
                   "alpha is lowered until at least this many neighbors are found"),
     )
 
+    def examined(self) -> int:
+        """Only the ``candidates`` nearest points are tested."""
+        return self.params["candidates"]
+
     def validate(self, params: dict) -> None:
         where = f"method '{self.name}'"
         if params["alpha_step"] > params["alpha_start"]:

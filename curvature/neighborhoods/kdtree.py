@@ -15,9 +15,13 @@ points coincide stays a leaf, so duplicates are harmless). Queries are best run 
 from __future__ import annotations
 
 import numpy as np
-from numba import njit
+from numba import njit, prange
 
 LEAF_SIZE = 12
+# Up to this many neighbors, branch-free rank counting sorts the result fastest.
+RANK_SORT_MAX = 48
+# Queries per parallel task of knn_parallel (each task allocates its own scratch).
+KNN_BLOCK = 64
 
 
 @njit(cache=True)
@@ -300,6 +304,17 @@ def knn_point(points, tree, p, k, ds, ids, snode, sdist, bufd, bufi):
                     snode[top] = r
                     sdist[top] = dr
                     top += 1
+    if size > RANK_SORT_MAX:
+        # heapsort in place: O(k log k) where rank counting's O(k^2) would dominate
+        for end in range(size - 1, 0, -1):
+            d = ds[0]
+            c = ids[0]
+            ds[0] = ds[end]
+            ids[0] = ids[end]
+            ds[end] = d
+            ids[end] = c
+            _sift_down(ds, ids, 0, end)
+        return size
     # sort by rank counting (branch free): increasing (d2, index)
     for i in range(size):
         bufd[i] = ds[i]
@@ -351,3 +366,33 @@ def knn_rows(points, tree, idx, k):
         knn_point(points, tree, idx[t], k, d2[t], nbr[t], snode, sdist, bufd, bufi)
     return nbr, d2
 
+
+
+@njit(parallel=True, cache=True)
+def knn_parallel(points, tree, idx, k, nbr, d2):
+    """Exact k nearest neighbors of ``points[idx]`` in parallel; rows as in :func:`knn_rows`.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3), float64
+    tree : tuple
+        From :func:`build_tree` over ``points``.
+    idx : ndarray, shape (m,), int64
+        Query indices (best in a spatially coherent order, e.g. Morton order).
+    k : int
+        Neighbors wanted, ``1 <= k <= n - 1``.
+    nbr : ndarray, shape (m, k), int32 or int64
+        Output: neighbor indices sorted by ``(d2, index)``.
+    d2 : ndarray, shape (m, k), float64
+        Output: their squared distances.
+    """
+    m = idx.shape[0]
+    for b in prange((m + KNN_BLOCK - 1) // KNN_BLOCK):
+        snode, sdist, bufd, bufi = knn_scratch(tree, k)
+        ds = np.empty(k)
+        ids = np.empty(k, np.int64)
+        for t in range(b * KNN_BLOCK, min(m, (b + 1) * KNN_BLOCK)):
+            knn_point(points, tree, idx[t], k, ds, ids, snode, sdist, bufd, bufi)
+            for i in range(k):
+                nbr[t, i] = ids[i]
+                d2[t, i] = ds[i]

@@ -41,6 +41,11 @@ class MeshFinder(TreeMixin, NeighborFinder):
         self._graph: tuple[np.ndarray, np.ndarray] | None = None
         self._lock = threading.Lock()
 
+    def use_graph(self, graph: tuple[np.ndarray, np.ndarray]) -> None:
+        """Use a vertex graph built elsewhere (a tile's part of the whole cloud's graph)."""
+        with self._lock:
+            self._graph = graph
+
     def graph(self, workers: int = 1) -> tuple[np.ndarray, np.ndarray]:
         """The vertex graph in CSR, built on first use.
 

@@ -233,6 +233,10 @@ class TerritoryFinder(TreeMixin, NeighborFinder):
                   "rings are added until at least this many neighbors are gathered"),
     )
 
+    def examined(self) -> int:
+        """Every ring lies within the ``candidates + min_neighbors - 1`` nearest points."""
+        return self.params["candidates"] + self.params["min_neighbors"] - 1
+
     def validate(self, params: dict) -> None:
         where = f"method '{self.name}'"
         if params["beta_min"] > params["beta_max"]:

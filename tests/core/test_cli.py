@@ -21,7 +21,8 @@ def sphere_file(tmp_path_factory):
 
 def test_estimate_writes_result_and_summary(sphere_file, tmp_path, capsys):
     out = tmp_path / "res.ply"
-    assert main(["estimate", str(sphere_file), "-o", str(out), "--fit", "monge", "--k", "20"]) == 0
+    assert main(["estimate", str(sphere_file), "-o", str(out), "--method", "knn", "--fit", "monge",
+                 "--k", "20"]) == 0
     err = capsys.readouterr().err
     assert "points      3000" in err and "failures    none" in err and "k1" in err
     back = curvature.read(out)
@@ -37,6 +38,24 @@ def test_estimate_csv_output_and_quiet(sphere_file, tmp_path, capsys):
     assert capsys.readouterr().err == ""
     header = out.read_text().splitlines()[0]
     assert "k1" in header and "gaussian" in header
+
+
+def test_default_is_auto_and_reports_what_it_measured(sphere_file, tmp_path, capsys):
+    out = tmp_path / "res.npz"
+    assert main(["estimate", str(sphere_file), "-o", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "method      auto" in err
+    assert "relative noise" in err and "clean: implicit quadric" in err
+    k1 = np.load(out)["k1"]
+    assert np.allclose(k1, 0.5, rtol=1e-6)
+
+
+def test_preset_paper(sphere_file, tmp_path, capsys):
+    out = tmp_path / "res.npz"
+    assert main(["estimate", str(sphere_file), "-o", str(out), "--preset", "paper",
+                 "--candidates", "40"]) == 0
+    err = capsys.readouterr().err
+    assert "method      tc" in err and "'min_neighbors': 10" in err and "'candidates': 40" in err
 
 
 def test_info(capsys, shared_data):
@@ -58,8 +77,14 @@ def test_neighbors_prints_one_neighborhood(sphere_file, capsys):
 @pytest.mark.parametrize("argv, message", [
     (["estimate", "missing.ply", "-o", "x.ply"], "missing.ply"),
     (["neighbors", "SPHERE", "--index", "99999"], "outside 0..2999"),
-    (["estimate", "SPHERE", "-o", "OUT", "--beta-min", "1.2"], "does not apply to method 'knn'"),
-    (["estimate", "SPHERE", "-o", "OUT", "--k", "1"], "'k' must be >= 5"),
+    (["estimate", "SPHERE", "-o", "OUT", "--beta-min", "1.2"], "does not apply to method 'auto'"),
+    (["estimate", "SPHERE", "-o", "OUT", "--method", "knn", "--beta-min", "1.2"],
+     "does not apply to method 'knn'"),
+    (["estimate", "SPHERE", "-o", "OUT", "--k", "1"], "'k' must be >= 48"),
+    (["estimate", "SPHERE", "-o", "OUT", "--method", "knn", "--k", "1"], "'k' must be >= 5"),
+    (["estimate", "SPHERE", "-o", "OUT", "--fit", "monge"], "method 'auto' chooses its own fit"),
+    (["estimate", "SPHERE", "-o", "OUT", "--preset", "paper", "--method", "knn"],
+     "contradicts"),
 ])
 def test_errors_exit_2_with_message(argv, message, sphere_file, tmp_path, capsys):
     argv = [str(sphere_file) if a == "SPHERE" else str(tmp_path / "o.ply") if a == "OUT" else a

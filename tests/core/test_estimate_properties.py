@@ -31,10 +31,10 @@ def same(a, b, rtol=1e-7, atol=1e-9):
 @pytest.mark.parametrize("fit, noise", CASES)
 def test_rotation_and_translation_invariance(fit, noise):
     torus = cloud_for(noise)
-    base = curvature.estimate(torus.points, fit=fit)
+    base = curvature.estimate(torus.points, "knn", fit=fit)
     rot = Rotation.from_euler("xyz", [0.3, -1.1, 2.0]).as_matrix()
     moved = torus.points @ rot.T + np.array([1000.0, -250.0, 42.0])
-    res = curvature.estimate(moved, fit=fit)
+    res = curvature.estimate(moved, "knn", fit=fit)
     same(base, res, rtol=1e-6, atol=1e-6)
     np.testing.assert_allclose(res.normals, base.normals @ rot.T, atol=1e-6)
 
@@ -42,9 +42,9 @@ def test_rotation_and_translation_invariance(fit, noise):
 @pytest.mark.parametrize("fit, noise", CASES)
 def test_scale_divides_curvature(fit, noise):
     torus = cloud_for(noise)
-    base = curvature.estimate(torus.points, fit=fit)
+    base = curvature.estimate(torus.points, "knn", fit=fit)
     s = 25.0
-    res = curvature.estimate(torus.points * s, fit=fit)
+    res = curvature.estimate(torus.points * s, "knn", fit=fit)
     np.testing.assert_array_equal(base.status, res.status)
     np.testing.assert_allclose(res.k1 * s, base.k1, rtol=1e-8, atol=1e-9)
     np.testing.assert_allclose(res.k2 * s, base.k2, rtol=1e-8, atol=1e-9)
@@ -54,9 +54,9 @@ def test_scale_divides_curvature(fit, noise):
 @pytest.mark.parametrize("fit, noise", CASES)
 def test_point_order_invariance(fit, noise):
     torus = cloud_for(noise)
-    base = curvature.estimate(torus.points, fit=fit)
+    base = curvature.estimate(torus.points, "knn", fit=fit)
     perm = np.random.default_rng(3).permutation(len(torus.points))
-    res = curvature.estimate(torus.points[perm], fit=fit)
+    res = curvature.estimate(torus.points[perm], "knn", fit=fit)
     np.testing.assert_array_equal(res.status, base.status[perm])
     np.testing.assert_allclose(res.k1, base.k1[perm], rtol=1e-9, atol=1e-12)
     np.testing.assert_allclose(res.k2, base.k2[perm], rtol=1e-9, atol=1e-12)
@@ -64,9 +64,9 @@ def test_point_order_invariance(fit, noise):
 
 
 def test_identical_for_any_workers_and_chunking(torus):
-    ref = curvature.estimate(torus.points, workers=1)
+    ref = curvature.estimate(torus.points, "knn", workers=1)
     for workers, chunk in [(2, 32768), (1, 333), (2, 1000)]:
-        res = curvature.estimate(torus.points, workers=workers, chunk_size=chunk)
+        res = curvature.estimate(torus.points, "knn", workers=workers, chunk_size=chunk)
         for name, arr in ref.fields().items():
             np.testing.assert_array_equal(getattr(res, name), arr, err_msg=name)
 
@@ -74,7 +74,7 @@ def test_identical_for_any_workers_and_chunking(torus):
 @pytest.mark.parametrize("shape", ["sphere", "ellipsoid", "torus"])
 def test_auto_orientation_points_outward(shape):
     cloud = synthetic.make(shape, 20000, seed=12)
-    res = curvature.estimate(cloud.points, fit="monge")
+    res = curvature.estimate(cloud.points, "knn", fit="monge")
     outward = np.einsum("ij,ij->i", res.normals, cloud.normals) > 0
     assert outward.mean() >= 0.999
     assert res.info["orientation"] == "auto"
@@ -82,9 +82,9 @@ def test_auto_orientation_points_outward(shape):
 
 def test_sign_convention_sphere_and_flip():
     cloud = synthetic.sphere(3000, radius=4.0, seed=13)
-    res = curvature.estimate(cloud.points, normals=cloud.normals)
+    res = curvature.estimate(cloud.points, "knn", normals=cloud.normals)
     assert np.allclose(res.k1, 0.25, rtol=1e-3) and np.allclose(res.k2, 0.25, rtol=1e-3)
-    inward = curvature.estimate(cloud.points, normals=-cloud.normals)
+    inward = curvature.estimate(cloud.points, "knn", normals=-cloud.normals)
     np.testing.assert_allclose(inward.k1, -res.k2, rtol=1e-12)
     np.testing.assert_allclose(inward.k2, -res.k1, rtol=1e-12)
     np.testing.assert_allclose(inward.gaussian, res.gaussian, rtol=1e-12)
@@ -93,7 +93,7 @@ def test_sign_convention_sphere_and_flip():
 
 def test_viewpoint_orientation_faces_scanner():
     cloud = synthetic.plane(2000, seed=14)
-    res = curvature.estimate(cloud.points, viewpoint=[0.0, 0.0, -10.0])
+    res = curvature.estimate(cloud.points, "knn", viewpoint=[0.0, 0.0, -10.0])
     assert res.info["orientation"] == "viewpoint"
     assert np.all(res.normals[:, 2] < 0)
 
@@ -106,7 +106,7 @@ def test_degenerate_points_get_status_not_exception():
     line = np.c_[np.linspace(0, 1, 30), np.zeros(30), np.zeros(30)] + [-50.0, 0, 0]
     pts = np.vstack([cloud, dup, line + rng.normal(scale=0, size=line.shape)])
     for fit in ("implicit", "monge"):
-        res = curvature.estimate(pts, fit=fit, k=10)
+        res = curvature.estimate(pts, "knn", fit=fit, k=10)
         bad = res.status[500:]
         assert np.all(bad != 0), fit
         assert np.all(np.isnan(res.k1[500:])) and np.all(np.isnan(res.mean[500:]))
@@ -115,15 +115,15 @@ def test_degenerate_points_get_status_not_exception():
 
 def test_too_few_neighbors_status():
     pts = synthetic.sphere(100, seed=16).points
-    res = curvature.estimate(pts, k=5)  # 6 points < 9 needed by the implicit quadric
+    res = curvature.estimate(pts, "knn", k=5)  # 6 points < 9 needed by the implicit quadric
     assert np.all(res.status == curvature.Status.TOO_FEW_NEIGHBORS)
     assert np.all(np.isnan(res.k1))
-    ok = curvature.estimate(pts, k=5, fit="monge")
+    ok = curvature.estimate(pts, "knn", k=5, fit="monge")
     assert np.mean(ok.status == 0) > 0.9
 
 
 def test_result_fields_and_counts(torus):
-    res = curvature.estimate(torus.points, k=16)
+    res = curvature.estimate(torus.points, "knn", k=16)
     n = len(torus.points)
     assert res.k1.shape == (n,) and res.normals.shape == (n, 3)
     assert res.status.dtype == np.int8
@@ -140,7 +140,7 @@ def test_result_fields_and_counts(torus):
 def test_progress_is_reported():
     pts = synthetic.sphere(5000, seed=17).points
     calls = []
-    curvature.estimate(pts, chunk_size=1000, progress=lambda d, t: calls.append((d, t)))
+    curvature.estimate(pts, "knn", chunk_size=1000, progress=lambda d, t: calls.append((d, t)))
     assert calls == [(d, 5000) for d in (1000, 2000, 3000, 4000, 5000)]
 
 
@@ -151,7 +151,7 @@ def test_progress_exception_aborts():
         raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt):
-        curvature.estimate(pts, chunk_size=1000, progress=cancel)
+        curvature.estimate(pts, "knn", chunk_size=1000, progress=cancel)
 
 
 @pytest.mark.parametrize("points, match", [
@@ -186,7 +186,7 @@ def test_bad_parameters(kwargs, match):
     pts = synthetic.sphere(50, seed=19).points
     with pytest.raises(curvature.ParameterError if "normals" not in kwargs and
                        "faces" not in kwargs else curvature.CurvatureInputError, match=match):
-        curvature.estimate(pts, **kwargs)
+        curvature.estimate(pts, **{"method": "knn", **kwargs})
 
 
 def test_errors_are_value_errors():

@@ -15,7 +15,7 @@ def mean_errors(res, cloud):
 
 def test_sphere_without_noise():
     cloud = synthetic.sphere(10000, radius=2.0, seed=1)
-    res = curvature.estimate(cloud.points, k=384, fit="nfr", normals=cloud.normals)
+    res = curvature.estimate(cloud.points, "knn", k=384, fit="nfr", normals=cloud.normals)
     assert np.all(res.status == 0)
     e1, e2 = mean_errors(res, cloud)
     # Stage-1 PCA normals of lopsided neighborhoods tilt slightly: about 1 % of 1/r.
@@ -26,24 +26,25 @@ def test_sphere_without_noise():
 
 def test_noisy_torus_beats_the_monge_fit_by_far():
     cloud = synthetic.torus(10000, noise=0.5, seed=1)
-    res = curvature.estimate(cloud.points, k=384, fit="nfr", normals=cloud.normals)
+    res = curvature.estimate(cloud.points, "knn", k=384, fit="nfr", normals=cloud.normals)
     e1, e2 = mean_errors(res, cloud)
     # Measured 0.036 / 0.040; the quadratic Monge fit over 192 neighbors gives 0.067 / 0.056.
     assert e1 < 0.05 and e2 < 0.052
-    monge = curvature.estimate(cloud.points, k=192, fit="monge", normals=cloud.normals)
+    monge = curvature.estimate(cloud.points, "knn", k=192, fit="monge", normals=cloud.normals)
     m1, m2 = mean_errors(monge, cloud)
     assert e1 < m1 and e2 < m2
 
 
 def test_sign_follows_the_orientation_and_results_are_rotation_invariant():
     cloud = synthetic.torus(4000, noise=0.2, seed=2)
-    out = curvature.estimate(cloud.points, k=96, fit="nfr", normal_k=32, normals=cloud.normals)
-    inward = curvature.estimate(cloud.points, k=96, fit="nfr", normal_k=32,
+    out = curvature.estimate(cloud.points, "knn", k=96, fit="nfr", normal_k=32,
+                             normals=cloud.normals)
+    inward = curvature.estimate(cloud.points, "knn", k=96, fit="nfr", normal_k=32,
                                 normals=-cloud.normals)
     np.testing.assert_allclose(inward.k1, -out.k2, atol=1e-12)
     np.testing.assert_allclose(inward.k2, -out.k1, atol=1e-12)
     rot = Rotation.from_euler("zyx", [0.7, -0.4, 1.9]).as_matrix()
-    turned = curvature.estimate(cloud.points @ rot.T + 5.0, k=96, fit="nfr", normal_k=32,
+    turned = curvature.estimate(cloud.points @ rot.T + 5.0, "knn", k=96, fit="nfr", normal_k=32,
                                 normals=cloud.normals @ rot.T)
     np.testing.assert_allclose(turned.k1, out.k1, rtol=1e-6, atol=1e-8)
     np.testing.assert_allclose(turned.k2, out.k2, rtol=1e-6, atol=1e-8)
@@ -51,17 +52,17 @@ def test_sign_follows_the_orientation_and_results_are_rotation_invariant():
 
 def test_identical_for_any_workers():
     cloud = synthetic.bezier_patch(3000, noise=0.1, seed=3)
-    a = curvature.estimate(cloud.points, k=64, fit="nfr", workers=1)
-    b = curvature.estimate(cloud.points, k=64, fit="nfr", workers=2, chunk_size=500)
+    a = curvature.estimate(cloud.points, "knn", k=64, fit="nfr", workers=1)
+    b = curvature.estimate(cloud.points, "knn", k=64, fit="nfr", workers=2, chunk_size=500)
     for name, arr in a.fields().items():
         np.testing.assert_array_equal(getattr(b, name), arr, err_msg=name)
 
 
 def test_too_few_neighbors_and_parameter_errors():
     pts = synthetic.sphere(200, seed=4).points
-    res = curvature.estimate(pts, k=8, fit="nfr")
+    res = curvature.estimate(pts, "knn", k=8, fit="nfr")
     assert np.all(res.status == curvature.Status.TOO_FEW_NEIGHBORS)
     with pytest.raises(curvature.ParameterError, match="applies to fit 'nfr' only"):
-        curvature.estimate(pts, normal_k=20)
+        curvature.estimate(pts, "knn", normal_k=20)
     with pytest.raises(curvature.ParameterError, match="'normal_k' must be >= 6"):
-        curvature.estimate(pts, fit="nfr", normal_k=3)
+        curvature.estimate(pts, "knn", fit="nfr", normal_k=3)

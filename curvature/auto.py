@@ -1,0 +1,415 @@
+"""The default estimator (``method="auto"``): picks its model and scale from the cloud itself.
+
+On noisy scans the neighborhood size decides the error far more than the fit model
+(docs/accuracy.md), and users cannot tune it per scan. This estimator measures the cloud first:
+
+1. **Plan** (:func:`plan_auto`): on a geometric subsample it measures the point spacing (median
+   distance to the 24th neighbor) and the noise (median RMS residual of quadratic Monge fits
+   over 24 neighbors), relative to that spacing.
+2. **Clean clouds** (relative noise below ``noise_threshold``): the paper's implicit quadric over
+   24 neighbors, which is exact on quadrics and within a few 0.1 % elsewhere.
+3. **Noisy clouds**: normal-field regression (:mod:`curvature.fitting.normal_field`) over ``k``
+   neighbors, which averages noise away without the bias a quadric shows at that scale. Stage-1
+   PCA normals (``normal_k`` neighbors) are regressed on tangent position around *anchors*, one
+   point per grid cell of 1.5 spacings; every point reads its curvature off its cell anchor's
+   fitted normal field at its own position. A second pass over ``k / 2`` neighbors regresses the
+   normals of the first pass. Anchors cut the work of the large fits about thirteenfold at no
+   measured loss of accuracy; the second pass halves the noise error.
+
+Everything depends on the points' coordinates only, never on their order, so the results are
+identical for any point order and any ``workers``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from numba import njit
+
+from .fitting.kernels import FIT_IMPLICIT, FIT_MONGE, SOLVER_TAUBIN, fit_batch
+from .fitting.normal_field import N_TERMS, nfr_anchor_fits, nfr_from_anchors, pca_normals
+from .neighborhoods.kdtree import build_tree, knn_parallel
+from .params import ParamSpec
+from .status import Status
+
+AUTO_PARAMS = (
+    ParamSpec("k", int, 384, 48, 1024,
+              help="neighbors of the normal-field regression on noisy clouds (second pass: k/2)"),
+    ParamSpec("normal_k", int, 48, 12, 256, help="neighbors of the stage-1 PCA normals"),
+    ParamSpec("noise_threshold", float, 0.01, 0.0, 1.0,
+              help="relative noise (RMS residual / spacing) below which a cloud counts as clean "
+                   "and gets the implicit quadric over 24 neighbors"),
+)
+# Neighbors of the spacing and noise measurements and of the clean-cloud fit.
+PLAN_K = 24
+# The plan's subsample keeps one point per cell of this fraction of the bounding-box diagonal.
+PLAN_CELLS = 64
+# Anchor grid cell, in spacings (about 13 points a cell on a surface).
+ANCHOR_CELL = 1.5
+
+
+@dataclass(frozen=True)
+class AutoPlan:
+    """Cloud-wide quantities every part of a run must share (also across tiles).
+
+    Attributes
+    ----------
+    spacing : float
+        Median distance of a point to its 24th nearest neighbor.
+    noise : float
+        Relative noise: median RMS residual of 24-neighbor Monge fits divided by ``spacing``.
+    clean : bool
+        ``noise < noise_threshold``: the implicit quadric is used.
+    origin : tuple of float
+        Corner of the anchor grid (the cloud's bounding-box minimum).
+    cell : float
+        Anchor grid cell size.
+    """
+
+    spacing: float
+    noise: float
+    clean: bool
+    origin: tuple
+    cell: float
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@njit(cache=True)
+def _cell_representatives(points, cells, cell_of, center):
+    """Per cell, the point nearest the cell's centre (ties: smaller x, then y, then z).
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+    cells : int
+        Number of distinct cells.
+    cell_of : ndarray, shape (n,), int64
+        Cell of every point, in ``range(cells)``.
+    center : ndarray, shape (n, 3)
+        Centre of every point's cell.
+
+    Returns
+    -------
+    ndarray, shape (cells,), int64
+        The representative point of every cell.
+    """
+    best = np.full(cells, -1, np.int64)
+    best_d = np.empty(cells)
+    for i in range(points.shape[0]):
+        c = cell_of[i]
+        d = 0.0
+        for t in range(3):
+            d += (points[i, t] - center[i, t]) ** 2
+        b = best[c]
+        if b < 0 or d < best_d[c] or (d == best_d[c] and (
+                points[i, 0], points[i, 1], points[i, 2]) < (points[b, 0], points[b, 1],
+                                                             points[b, 2])):
+            best[c] = i
+            best_d[c] = d
+    return best
+
+
+def grid_cells(points: np.ndarray, origin: np.ndarray,
+               cell: float) -> tuple[np.ndarray, np.ndarray]:
+    """Representatives of the occupied cells of a grid, and each point's cell.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+    origin : ndarray, shape (3,)
+        Grid corner.
+    cell : float
+        Cell size.
+
+    Returns
+    -------
+    reps : ndarray, shape (c,), int64
+        One point per occupied cell (the nearest to its centre), increasing.
+    owner : ndarray, shape (n,), int64
+        Index into ``reps`` of every point's cell representative.
+    """
+    ijk = np.floor((points - origin) / cell).astype(np.int64)
+    ijk = np.maximum(ijk, 0)
+    # One integer key per cell; 21 bits an axis covers any grid the plan makes.
+    key = (ijk[:, 0] << 42) | (ijk[:, 1] << 21) | ijk[:, 2]
+    ukeys, cell_of = np.unique(key, return_inverse=True)
+    center = origin + (ijk + 0.5) * cell
+    best = _cell_representatives(points, ukeys.shape[0], cell_of.ravel(), center)
+    order = np.argsort(best)
+    reps = best[order]
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.shape[0])
+    return reps, rank[cell_of.ravel()]
+
+
+def coarse_cell(points: np.ndarray, cells: int) -> float:
+    """A grid cell that cuts the bounding-box diagonal into ``cells`` (never zero)."""
+    diag = float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
+    return diag / cells if diag > 0.0 else 1.0
+
+
+def knn_csr(points: np.ndarray, tree: tuple, idx: np.ndarray, k: int):
+    """k nearest neighbors of ``points[idx]`` as CSR arrays plus squared distances.
+
+    Returns
+    -------
+    indptr : ndarray, shape (m + 1,), int64
+    indices : ndarray, shape (m * k,), int32
+    d2 : ndarray, shape (m, k)
+    """
+    m = idx.shape[0]
+    nbr = np.empty((m, k), np.int32)
+    d2 = np.empty((m, k))
+    knn_parallel(points, tree, idx, k, nbr, d2)
+    return np.arange(0, (m + 1) * k, k, dtype=np.int64), nbr.ravel(), d2
+
+
+def plan_auto(points: np.ndarray, tree: tuple, noise_threshold: float) -> AutoPlan:
+    """Measure spacing and noise on a geometric subsample of the cloud.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+        The cloud (at least 10 points).
+    tree : tuple
+        :func:`~curvature.neighborhoods.kdtree.build_tree` over ``points``.
+    noise_threshold : float
+        Relative noise below which the cloud counts as clean.
+
+    Returns
+    -------
+    AutoPlan
+    """
+    origin = points.min(axis=0)
+    sample, _ = grid_cells(points, origin, coarse_cell(points, PLAN_CELLS))
+    k = min(PLAN_K, points.shape[0] - 1)
+    indptr, indices, d2 = knn_csr(points, tree, sample, k)
+    spacing = float(np.median(np.sqrt(d2[:, -1])))
+    m = sample.shape[0]
+    outs = [np.empty(m), np.empty(m), np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3)),
+            np.empty(m), np.empty(m, np.int8)]
+    fit_batch(points, sample, indptr, indices, FIT_MONGE, SOLVER_TAUBIN, True, *outs)
+    residual = outs[5][outs[6] == Status.OK]
+    noise = float(np.median(residual)) / spacing if residual.size and spacing > 0 else np.inf
+    if not spacing > 0.0:  # every point coincides with its 24 nearest: any cell works
+        spacing = coarse_cell(points, PLAN_CELLS)
+    return AutoPlan(spacing=spacing, noise=noise, clean=bool(noise < noise_threshold),
+                    origin=tuple(float(v) for v in origin), cell=ANCHOR_CELL * spacing)
+
+
+class AutoRun:
+    """One run of the auto estimator over a (Z-ordered) cloud, filling a result in place.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+    params : dict
+        Checked :data:`AUTO_PARAMS`.
+    chunk_size : int
+        Points (or anchors) per chunk; bounds the neighbor lists held at once.
+    progress : callable or None
+        ``progress(done, total)``.
+    plan : AutoPlan, optional
+        Cloud-wide measurements; measured on ``points`` when not given (a tile of a bigger
+        cloud gets the whole cloud's plan).
+    track_reach : bool
+        Also compute :attr:`reach`: for every point, a distance within which every point its
+        result depends on lies (tiling checks its halo with it).
+    """
+
+    def __init__(self, points, params, chunk_size, progress, plan: AutoPlan | None = None,
+                 track_reach: bool = False):
+        self.points = points
+        self.params = params
+        self.chunk_size = chunk_size
+        self.progress = progress
+        t0 = time.perf_counter()
+        self.tree = build_tree(points)
+        self.plan = plan_auto(points, self.tree, params["noise_threshold"]) if plan is None \
+            else plan
+        self.timings: dict[str, float] = {"plan": time.perf_counter() - t0}
+        self.track_reach = track_reach
+        self.reach: np.ndarray | None = None
+
+    def run(self, res, graph, orient_k: int) -> None:
+        """Fill every output array of ``res`` and the orientation graph (n, orient_k)."""
+        n = self.points.shape[0]
+        k_stage1 = min(max(self.params["normal_k"], PLAN_K, orient_k), n - 1)
+        kc = min(self.params["k"], n - 1)
+        reps, owner = grid_cells(self.points, np.asarray(self.plan.origin), self.plan.cell)
+        anchors_total = 0 if self.plan.clean else 2 * reps.shape[0]
+        self._total = 2 * n + anchors_total
+        self._done = 0
+        t0 = time.perf_counter()
+        field, radius = self._stage1(res, graph, k_stage1)
+        self.timings["stage1"] = time.perf_counter() - t0
+        if self.track_reach:
+            self.reach = radius[1] if self.plan.clean else np.zeros(n)
+        if self.plan.clean:
+            failed = np.flatnonzero(res.status != Status.OK)
+            if failed.size:  # rare: an implicit fit failed; its cell anchor's field takes over
+                self._fallback(res, field, radius[0], reps, owner, max(kc // 2, 12), failed)
+            return
+        self._anchored(res, field, radius[0], reps, owner, kc)
+
+    def _tick(self, count: int) -> None:
+        self._done += count
+        if self.progress is not None:
+            self.progress(min(self._done, self._total), self._total)
+
+    def _chunks(self, count: int):
+        for start in range(0, count, self.chunk_size):
+            yield slice(start, min(start + self.chunk_size, count))
+
+    def _stage1(self, res, graph, k: int):
+        """PCA normals of every point; on clean clouds also the implicit fits.
+
+        Returns the normals (n, 3) and two radii (n,): of the PCA neighborhoods and of the
+        implicit fits' neighborhoods (clean clouds).
+        """
+        n = self.points.shape[0]
+        field = np.empty((n, 3))
+        normal_k = min(self.params["normal_k"], k)
+        kp = min(PLAN_K, k)
+        r_normal = np.empty(n)
+        r_fit = np.empty(n) if self.plan.clean else None
+        for sl in self._chunks(n):
+            query = np.arange(sl.start, sl.stop, dtype=np.int64)
+            indptr, indices, d2 = knn_csr(self.points, self.tree, query, k)
+            nbr = indices.reshape(-1, k)
+            r_normal[sl] = np.sqrt(d2[:, normal_k - 1])
+            if graph is not None:
+                graph[sl] = nbr[:, :graph.shape[1]]
+            pca_normals(self.points, query, *_prefix_csr(nbr, normal_k), field[sl])
+            if self.plan.clean:
+                fit_batch(self.points, query, *_prefix_csr(nbr, kp), FIT_IMPLICIT,
+                          SOLVER_TAUBIN, True, *_outputs(res, sl))
+                res.neighbor_count[sl] = kp
+                r_fit[sl] = np.sqrt(d2[:, kp - 1])
+            self._tick(2 * (sl.stop - sl.start) if self.plan.clean else sl.stop - sl.start)
+        return field, (r_normal, r_fit)
+
+    def _anchored(self, res, field, r_normal, reps, owner, kc) -> None:
+        """Two passes of anchored normal-field regression over every point."""
+        points = self.points
+        query = np.arange(points.shape[0], dtype=np.int64)
+        # How far the first pass's normal of each point depends on: its anchor's fit reads
+        # stage-1 normals of the anchor's neighbors, each made from their own neighbors.
+        w = r_normal
+        for k_pass, last in ((kc, False), (max(kc // 2, 12), True)):
+            t0 = time.perf_counter()
+            fits, fit_reach = self._fit_anchors(reps, field, min(k_pass, points.shape[0] - 1),
+                                                w)
+            if last:
+                for sl in self._chunks(query.shape[0]):
+                    out = _OutputView(res, query[sl])
+                    nfr_from_anchors(points, query[sl], owner[sl], reps, *fits, *out.arrays)
+                    out.store(k_pass)
+                    self._tick(sl.stop - sl.start)
+            else:
+                # Refined normals of every point: the first pass's field at the point.
+                field = self._refined_field(field, reps, owner, fits)
+            if self.track_reach:
+                w = self._point_reach(reps, owner, fit_reach)
+            name = "pass2" if last else "pass1"
+            self.timings[name] = self.timings.get(name, 0.0) + time.perf_counter() - t0
+        if self.track_reach:
+            self.reach = w
+
+    def _fallback(self, res, field, r_normal, reps, owner, k, failed) -> None:
+        """One anchored pass over ``k`` neighbors on the stage-1 normals, for failed points.
+
+        One pass keeps each point's result a function of its own cell only, so it does not
+        depend on which other points failed (tiles see different ones).
+        """
+        used = np.unique(owner[failed])
+        local = np.full(reps.shape[0], -1, np.int64)
+        local[used] = np.arange(used.shape[0])
+        fits, fit_reach = self._fit_anchors(reps[used], field, min(k, self.points.shape[0] - 1),
+                                            r_normal)
+        out = _OutputView(res, failed.astype(np.int64))
+        nfr_from_anchors(self.points, failed.astype(np.int64), local[owner[failed]], reps[used],
+                         *fits, *out.arrays)
+        out.store(k)
+        if self.track_reach:
+            full = np.zeros(reps.shape[0])
+            full[used] = fit_reach
+            self.reach[failed] = self._point_reach(reps, owner, full)[failed]
+
+    def _point_reach(self, reps, owner, fit_reach) -> np.ndarray:
+        """Reach of each point's anchored result: its anchor's fit, plus the anchor's distance,
+        plus its cell's diagonal (every point of its cell decides which point anchors it)."""
+        d = np.linalg.norm(self.points - self.points[reps[owner]], axis=1)
+        return d + fit_reach[owner] + np.sqrt(3.0) * self.plan.cell
+
+    def _fit_anchors(self, anchors, field, k, w):
+        """Fits at ``anchors`` over ``k`` neighbors; also each fit's reach: the largest
+        ``distance + w[q]`` over the anchor and its neighbors q."""
+        a = anchors.shape[0]
+        coef = np.empty((a, 2, N_TERMS))
+        scale, resid = np.empty(a), np.empty(a)
+        frame = np.empty((a, 3, 3))
+        status = np.empty(a, np.int8)
+        reach = np.empty(a) if self.track_reach else None
+        for sl in self._chunks(a):
+            indptr, indices, d2 = knn_csr(self.points, self.tree, anchors[sl], k)
+            nfr_anchor_fits(self.points, field, anchors[sl], indptr, indices, coef[sl],
+                            scale[sl], frame[sl], resid[sl], status[sl])
+            if reach is not None:
+                nbr = indices.reshape(-1, k)
+                reach[sl] = np.maximum((np.sqrt(d2) + w[nbr]).max(axis=1), w[anchors[sl]])
+            self._tick(sl.stop - sl.start)
+        return (coef, scale, frame, resid, status), reach
+
+    def _refined_field(self, field, anchors, owner, fits):
+        """First-pass normals at every point, computed in chunks (``field`` where failed)."""
+        refined = field.copy()
+        n = self.points.shape[0]
+        for sl in self._chunks(n):
+            query = np.arange(sl.start, sl.stop, dtype=np.int64)
+            m = query.shape[0]
+            outs = [np.empty(m), np.empty(m), np.empty((m, 3)), np.empty((m, 3)),
+                    np.empty((m, 3)), np.empty(m), np.empty(m, np.int8)]
+            nfr_from_anchors(self.points, query, owner[sl], anchors, *fits, *outs)
+            ok = outs[6] == Status.OK
+            refined[query[ok]] = outs[2][ok]
+        return refined
+
+
+def _prefix_csr(nbr: np.ndarray, k: int):
+    """CSR arrays of the first ``k`` columns of a (m, K) neighbor table."""
+    m = nbr.shape[0]
+    return (np.arange(0, (m + 1) * k, k, dtype=np.int64),
+            np.ascontiguousarray(nbr[:, :k]).ravel())
+
+
+def _outputs(res, sl: slice) -> tuple:
+    """The output arrays of ``fit_batch`` as views of a result's rows ``sl``."""
+    return (res.k1[sl], res.k2[sl], res.normals[sl], res.dir1[sl], res.dir2[sl],
+            res.residual[sl], res.status[sl])
+
+
+class _OutputView:
+    """Scratch outputs for scattered query rows, copied into the result by :meth:`store`."""
+
+    def __init__(self, res, rows: np.ndarray):
+        m = rows.shape[0]
+        self.res = res
+        self.rows = rows
+        self.arrays = (np.empty(m), np.empty(m), np.empty((m, 3)), np.empty((m, 3)),
+                       np.empty((m, 3)), np.empty(m), np.empty(m, np.int8))
+
+    def store(self, neighbor_count: int) -> None:
+        r = self.rows
+        k1, k2, normals, dir1, dir2, residual, status = self.arrays
+        self.res.k1[r], self.res.k2[r], self.res.residual[r], self.res.status[r] = \
+            k1, k2, residual, status
+        self.res.normals[r], self.res.dir1[r], self.res.dir2[r] = normals, dir1, dir2
+        self.res.neighbor_count[r] = neighbor_count
+
+
+__all__ = ["AUTO_PARAMS", "AutoPlan", "AutoRun", "grid_cells", "plan_auto"]
