@@ -1,7 +1,11 @@
 # syntax=docker/dockerfile:1
 # Curvature REST service: embedded SQLite job store + local process pool, data in /data.
 #   docker build -t curvature-service .
-#   docker run -p 8000:8000 -v curvature-data:/data curvature-service
+#   docker run -p 8000:8000 -v curvature-data:/data -e CURVATURE_API_KEYS=<key1>,<key2> \
+#       curvature-service
+# The image listens on 0.0.0.0, so it refuses to start without API keys (exit status 78):
+# give CURVATURE_API_KEYS, or CURVATURE_API_KEYS_FILE pointing at a mounted secret (one key a
+# line), or set CURVATURE_ALLOW_OPEN=true to run it open on purpose.
 
 # --- build: install the package and its service extra into a virtualenv -------------------
 FROM python:3.11-slim AS build

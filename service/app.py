@@ -13,13 +13,14 @@ from fastapi.openapi.utils import get_openapi
 import curvature
 
 from . import problems
-from .cleanup import cleanup_loop
+from .auth import is_loopback, load_keyring
+from .cleanup import BusyFolders, cleanup_loop, sweep
 from .executor import create_executor
 from .metrics import RequestMetricsMiddleware, ServiceMetrics
 from .problem_types import PROBLEM_TYPES, ProblemError
 from .problems import PROBLEM_MEDIA_TYPE
 from .routes import curvature as curvature_routes
-from .routes import health, jobs, methods
+from .routes import health, jobs, methods, preview, ui
 from .routes import problems as problem_routes
 from .schemas import CloudRequest, MultipartCloudRequest, Problem
 from .settings import Settings
@@ -44,21 +45,37 @@ INTERRUPTED = ProblemError(
 
 @asynccontextmanager
 async def lifespan(app: FastAPI):
-    """Open the store, re-queue interrupted jobs, start the pool and the cleanup task."""
+    """Load the API keys, open the store, re-queue interrupted jobs, remove what interrupted
+    uploads left, start the pool and the cleanup task."""
     settings: Settings = app.state.settings
+    if app.state.keyring is None:  # a second start of the same app keeps the first ring
+        app.state.keyring = load_keyring(settings)
+        # From here on only the keys' digests are kept.
+        app.state.settings = settings = settings.model_copy(update={"api_keys": None})
+    if not app.state.keyring.enabled:
+        log.warning("no API keys configured: every caller shares one anonymous owner and "
+                    "sees every job; %s (set CURVATURE_API_KEYS to require keys)",
+                    f"listening on loopback ({settings.host}) only" if is_loopback(settings.host)
+                    else f"OPEN to anyone reaching {settings.host} (CURVATURE_ALLOW_OPEN)")
     for folder in (settings.data_dir, settings.jobs_dir, settings.tmp_dir):
         folder.mkdir(parents=True, exist_ok=True)
-    store = JobStore(settings.db_path)
+    store = JobStore(settings.db_path, settings.store_busy_timeout_seconds)
     await anyio.to_thread.run_sync(store.initialize)
     requeued, failed = await anyio.to_thread.run_sync(
-        store.requeue_interrupted, settings.max_attempts, INTERRUPTED)
+        store.requeue_interrupted, settings.max_attempts, INTERRUPTED,
+        settings.result_ttl_seconds)
     if requeued or failed:
         log.warning("recovered interrupted jobs: %d re-queued, %d failed", requeued, failed)
+    # No request is in progress yet, so any folder without a job row is left over from an
+    # upload the previous process never finished.
+    await anyio.to_thread.run_sync(lambda: sweep(settings, store, orphan_age=0.0))
     executor = create_executor(settings, store, app.state.metrics)
     await executor.start()
     app.state.store = store
     app.state.executor = executor
-    cleanup = asyncio.create_task(cleanup_loop(settings, store))
+    busy = app.state.busy_folders
+    cleanup = asyncio.create_task(cleanup_loop(
+        settings, store, lambda: executor.busy_ids() | busy()))
     log.info("curvature service ready on data dir %s with %d worker(s) (%s)",
              settings.data_dir.resolve(), settings.workers, settings.start_method)
     try:
@@ -126,10 +143,12 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.metrics = ServiceMetrics()
     app.state.store = None
     app.state.executor = None
+    app.state.keyring = None
+    app.state.busy_folders = BusyFolders()
     problems.install(app)
     # Added last = outermost: it also counts the 500s the catch-all produces.
     app.add_middleware(RequestMetricsMiddleware, metrics=app.state.metrics)
-    for module in (jobs, curvature_routes, methods, health, problem_routes):
+    for module in (jobs, preview, curvature_routes, methods, health, problem_routes, ui):
         app.include_router(module.router)
     app.openapi = lambda: build_openapi(app)
     return app

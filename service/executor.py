@@ -4,6 +4,11 @@ The store, not the pool, holds the queue: a dispatcher task hands the oldest que
 the pool, never more than there are workers, so a restart loses nothing (queued rows are simply
 picked up again) and synchronous requests wait behind at most one job per worker. The pool is
 created when the app starts, with an explicit multiprocessing start method.
+
+A watchdog task ends runs past the per-job time limit that did not stop by themselves (the
+pool is killed and rebuilt; the other runs it held are re-queued without counting against
+them), and re-queues running jobs no run of this process owns any more (their outcome could
+not be recorded), so no job stays ``running`` for ever.
 """
 
 from __future__ import annotations
@@ -16,6 +21,7 @@ import time
 import uuid
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
+from dataclasses import dataclass
 from pathlib import Path
 
 import anyio.to_thread
@@ -25,13 +31,34 @@ from .metrics import ServiceMetrics
 from .problem_types import ProblemError
 from .problems import HTTPProblem
 from .settings import Settings
-from .store import JobStore
+from .store import FAILED, JobStore
 
 log = logging.getLogger("service.executor")
 
 WORKER_CRASHED = ProblemError(
     "worker-crashed", "the worker process died while running this job, too many times "
     "(the cloud may need more memory than the worker has)").to_dict()
+OUTCOME_LOST = ProblemError(
+    "worker-crashed", "the outcome of this job could not be recorded, too many times "
+    "(is the server's disk full?)").to_dict()
+
+
+@dataclass(eq=False)
+class _Pool:
+    """A process pool, and whether it was killed on purpose (time limit) rather than broke."""
+
+    executor: ProcessPoolExecutor
+    killed_on_purpose: bool = False
+
+
+@dataclass(eq=False)
+class _InFlight:
+    """A job handed to the pool: its future, pool, run token and hand-over time."""
+
+    future: Future
+    pool: _Pool
+    token: str
+    handed_at: float
 
 
 class LocalPoolExecutor:
@@ -49,28 +76,36 @@ class LocalPoolExecutor:
         self.store = store
         self.metrics = metrics
         self.workers = settings.workers
-        self._pool: ProcessPoolExecutor | None = None
-        self._in_flight: dict[str, tuple[Future, ProcessPoolExecutor, float]] = {}
+        self._pool: _Pool | None = None
+        self._in_flight: dict[str, _InFlight] = {}
+        self._orphan_suspects: dict[str, str | None] = {}
+        self._timed_out: set[str] = set()  # runs being ended by the watchdog
         self._wake = asyncio.Event()
         self._tasks: list[asyncio.Task] = []
         self._loop: asyncio.AbstractEventLoop | None = None
         self._sync_pending = 0
         self._stopping = False
         self.warmed_up = not settings.warmup
-        self._options = {"estimate_workers": settings.estimate_workers,
-                         "progress_interval": settings.progress_interval_seconds,
-                         "result_ttl": settings.result_ttl_seconds}
+
+    @property
+    def _options(self) -> dict:
+        """What each run needs to know of the settings (read at every dispatch)."""
+        s = self.settings
+        return {"estimate_workers": s.estimate_workers,
+                "progress_interval": s.progress_interval_seconds,
+                "result_ttl": s.result_ttl_seconds, "time_limit": s.job_time_limit_seconds,
+                "max_points": s.max_points, "busy_timeout": s.store_busy_timeout_seconds}
 
     # -- lifecycle ---------------------------------------------------------------------------
 
-    def _new_pool(self) -> ProcessPoolExecutor:
+    def _new_pool(self) -> _Pool:
         context = multiprocessing.get_context(self.settings.start_method)
         if self.settings.start_method == "forkserver":
             # Import numpy/scipy/numba/curvature once in the fork server, not in every worker.
             context.set_forkserver_preload(["service.worker"])
-        return ProcessPoolExecutor(max_workers=self.workers, mp_context=context,
-                                   initializer=worker.init_worker,
-                                   initargs=(self.settings.log_level, os.getpid()))
+        return _Pool(ProcessPoolExecutor(max_workers=self.workers, mp_context=context,
+                                         initializer=worker.init_worker,
+                                         initargs=(self.settings.log_level, os.getpid())))
 
     async def start(self) -> None:
         """Create the pool, start warm-up and the dispatcher."""
@@ -80,6 +115,7 @@ class LocalPoolExecutor:
         if self.settings.warmup:
             self._tasks.append(asyncio.create_task(self._warm_up()))
         self._tasks.append(asyncio.create_task(self._dispatch_loop()))
+        self._tasks.append(asyncio.create_task(self._watch_loop()))
         self.wake()
 
     async def stop(self) -> None:
@@ -93,7 +129,7 @@ class LocalPoolExecutor:
             except (asyncio.CancelledError, Exception):
                 pass
         if self._pool is not None:
-            _terminate(self._pool)
+            _terminate(self._pool.executor)
             self._pool = None
         # Drop every reference to the old pool so its named semaphores are released (and
         # unregistered from the resource tracker) now rather than never.
@@ -108,6 +144,17 @@ class LocalPoolExecutor:
     def in_flight(self) -> int:
         return len(self._in_flight)
 
+    def busy_ids(self) -> set[str]:
+        """Jobs handed to the pool and not finished there (their files are in use)."""
+        return set(self._in_flight)
+
+    def worker_pids(self) -> list[int]:
+        """Process ids of the current pool's workers."""
+        if self._pool is None:
+            return []
+        processes = getattr(self._pool.executor, "_processes", None) or {}  # no API < 3.14
+        return [p.pid for p in list(processes.values()) if p.pid is not None]
+
     def wake(self) -> None:
         """Ask the dispatcher to look at the queue now (a job was added or a slot freed)."""
         self._wake.set()
@@ -115,7 +162,7 @@ class LocalPoolExecutor:
     async def _warm_up(self) -> None:
         # One task per worker also makes the pool start all its processes now.
         started = time.perf_counter()
-        futures = [asyncio.wrap_future(self._pool.submit(worker.warmup))
+        futures = [asyncio.wrap_future(self._pool.executor.submit(worker.warmup))
                    for _ in range(self.workers)]
         try:
             pids = await asyncio.gather(*futures)
@@ -146,18 +193,20 @@ class LocalPoolExecutor:
             return
         ids = await anyio.to_thread.run_sync(self.store.next_queued, free,
                                              set(self._in_flight))
+        options = self._options
         for job_id in ids:
             if job_id in self._in_flight:
                 continue
             pool = self._pool
             token = uuid.uuid4().hex
             try:
-                future = pool.submit(worker.run_job, str(self.settings.db_path),
-                                     str(self.settings.jobs_dir), job_id, token, self._options)
+                future = pool.executor.submit(worker.run_job, str(self.settings.db_path),
+                                              str(self.settings.jobs_dir), job_id, token,
+                                              options)
             except (BrokenProcessPool, RuntimeError):
                 self._replace_pool(pool)
                 return
-            self._in_flight[job_id] = (future, pool, time.perf_counter())
+            self._in_flight[job_id] = _InFlight(future, pool, token, time.perf_counter())
             future.add_done_callback(self._done_callback(job_id))
         self.metrics.pool_busy.set(len(self._in_flight))
 
@@ -178,37 +227,54 @@ class LocalPoolExecutor:
         self.metrics.pool_busy.set(len(self._in_flight))
         if self._stopping:
             return
-        if future.cancelled():
+        token = entry.token if entry is not None else None
+        if job_id in self._timed_out:
+            outcome = "time-limit"  # the watchdog records the outcome
+        elif future.cancelled():
             outcome = "not-started"
         elif isinstance(future.exception(), BrokenProcessPool):
             outcome = "crashed"
-            pool = entry[1] if entry else None
-            self._tasks.append(asyncio.create_task(self._after_crash(job_id, pool)))
+            pool = entry.pool if entry else None
+            self._tasks.append(asyncio.create_task(self._after_crash(job_id, token, pool)))
         elif future.exception() is not None:
             outcome = "error"
             log.error("job %s: pool error %r", job_id, future.exception())
-            self._tasks.append(asyncio.create_task(self._after_crash(job_id, None)))
+            self._tasks.append(asyncio.create_task(self._after_crash(job_id, token, None)))
         else:
             outcome = future.result()
         self.metrics.jobs_finished.inc(outcome=outcome)
         if entry is not None:
-            self.metrics.job_seconds.observe(time.perf_counter() - entry[2], outcome=outcome)
+            self.metrics.job_seconds.observe(time.perf_counter() - entry.handed_at,
+                                             outcome=outcome)
+        self._tasks = [t for t in self._tasks if not t.done()]
         self.wake()
 
-    async def _after_crash(self, job_id: str, pool: ProcessPoolExecutor | None) -> None:
-        status = await anyio.to_thread.run_sync(
-            self.store.requeue_after_crash, job_id, self.settings.max_attempts, WORKER_CRASHED)
-        log.warning("job %s: worker process died; job is now %s", job_id, status)
+    async def _after_crash(self, job_id: str, token: str | None, pool: _Pool | None,
+                           error: dict = WORKER_CRASHED) -> None:
+        # A pool killed on purpose stopped this run for another job's time limit.
+        on_purpose = pool is not None and pool.killed_on_purpose
+        try:
+            status = await anyio.to_thread.run_sync(lambda: self.store.requeue_after_crash(
+                job_id, token, self.settings.max_attempts, error,
+                count_attempt=not on_purpose, ttl=self.settings.result_ttl_seconds))
+        except Exception:  # e.g. the store is locked or full: the watchdog tries again
+            log.exception("job %s: could not re-queue it after its run ended", job_id)
+            status = "left running (retried by the watchdog)"
+        if status is not None:
+            log.warning("job %s: its run ended without an outcome%s; job is now %s", job_id,
+                        " (pool stopped for a time limit)" if on_purpose else "", status)
         if pool is not None:
             self._replace_pool(pool)
         self.wake()
 
-    def _replace_pool(self, broken: ProcessPoolExecutor) -> None:
+    def _replace_pool(self, broken: _Pool, on_purpose: bool = False) -> None:
         """Swap a broken pool for a new one (once, however many jobs report it)."""
         if self._pool is not broken or self._stopping:
             return
-        log.warning("worker pool broken; starting a new one")
-        _terminate(broken, grace=0.0)
+        broken.killed_on_purpose = broken.killed_on_purpose or on_purpose
+        log.warning("worker pool %s; starting a new one",
+                    "killed to end a run past its time limit" if on_purpose else "broken")
+        _terminate(broken.executor, grace=0.0, kill=on_purpose)
         self._pool = self._new_pool()
 
     def cancel(self, job_id: str) -> None:
@@ -218,7 +284,55 @@ class LocalPoolExecutor:
         """
         entry = self._in_flight.get(job_id)
         if entry is not None:
-            entry[0].cancel()
+            entry.future.cancel()
+
+    # -- watchdog ----------------------------------------------------------------------------
+
+    async def _watch_loop(self) -> None:
+        while True:
+            await asyncio.sleep(min(1.0, self.settings.dispatch_poll_seconds))
+            try:
+                await self.watch()
+            except Exception:
+                log.exception("watchdog failed; retrying")
+
+    async def watch(self) -> None:
+        """End runs past their time limit; re-queue running jobs that no run here owns."""
+        rows = await anyio.to_thread.run_sync(self.store.running)
+        # Read the in-flight table after the store: a job claimed before the query was
+        # handed to the pool before it, so it is in the table unless its run has ended.
+        now = time.time()
+        limit = self.settings.job_time_limit_seconds + self.settings.time_limit_grace_seconds
+        suspects: dict[str, str | None] = {}
+        for job_id, token, started_at in rows:
+            entry = self._in_flight.get(job_id)
+            if entry is not None and entry.token == token:
+                if started_at is not None and now - started_at > limit:
+                    await self._stop_overdue(job_id, entry)
+                continue
+            if self._orphan_suspects.get(job_id, "") == token:
+                # Seen without a run twice in a row: its outcome was lost.
+                await self._after_crash(job_id, token, None, OUTCOME_LOST)
+            else:
+                suspects[job_id] = token
+        self._orphan_suspects = suspects
+
+    async def _stop_overdue(self, job_id: str, entry: _InFlight) -> None:
+        settings = self.settings
+        log.warning("job %s: still running %g s past its time limit of %g s; killing the "
+                    "worker pool", job_id, settings.time_limit_grace_seconds,
+                    settings.job_time_limit_seconds)
+        # Kill first: a wedged worker may hold the store's write lock, and the outcome could
+        # not be written before it is gone.
+        self._timed_out.add(job_id)
+        try:
+            self._replace_pool(entry.pool, on_purpose=True)
+            error = worker.time_limit_problem(settings.job_time_limit_seconds).to_dict()
+            await anyio.to_thread.run_sync(lambda: self.store.finish(
+                job_id, entry.token, status=FAILED, ttl=settings.result_ttl_seconds,
+                error=error))
+        finally:
+            self._timed_out.discard(job_id)
 
     # -- direct calls ------------------------------------------------------------------------
 
@@ -228,7 +342,7 @@ class LocalPoolExecutor:
         if pool is None:
             raise HTTPProblem("not-ready", "the worker pool is not running")
         try:
-            return await asyncio.wrap_future(pool.submit(fn, *args))
+            return await asyncio.wrap_future(pool.executor.submit(fn, *args))
         except BrokenProcessPool:
             self._replace_pool(pool)
             raise HTTPProblem("internal-error", "the worker process died during the request; "
@@ -251,13 +365,18 @@ class LocalPoolExecutor:
         return await self.call(result_files.render, str(job_dir), fmt)
 
 
-def _terminate(pool: ProcessPoolExecutor, grace: float = 2.0) -> None:
+def _terminate(pool: ProcessPoolExecutor, grace: float = 2.0, kill: bool = False) -> None:
     """Shut a pool down without waiting for running jobs (they are re-queued on restart).
 
     Idle workers get the normal stop message and exit cleanly; workers still busy after
-    ``grace`` seconds are terminated.
+    ``grace`` seconds are terminated, or killed at once with ``kill`` (a run past its time
+    limit may be wedged, or stopped, and deaf to SIGTERM).
     """
     processes = list((getattr(pool, "_processes", None) or {}).values())  # no API before 3.14
+    if kill:
+        for process in processes:
+            if process.is_alive():
+                process.kill()
     pool.shutdown(wait=False, cancel_futures=True)
     deadline = time.monotonic() + grace
     for process in processes:
@@ -265,6 +384,10 @@ def _terminate(pool: ProcessPoolExecutor, grace: float = 2.0) -> None:
     for process in processes:
         if process.is_alive():
             process.terminate()
+            process.join(timeout=2)
+    for process in processes:
+        if process.is_alive():  # a stopped (SIGSTOP) or wedged worker ignores SIGTERM
+            process.kill()
             process.join(timeout=5)
     # The manager thread now sees the workers gone and releases the pool's queues.
     pool.shutdown(wait=True)

@@ -45,8 +45,13 @@ _TYPES = [
                 "The cloud has fewer points than a curvature estimate needs."),
     ProblemType("invalid-cloud", 422, "Invalid cloud",
                 "Points, normals or faces have the wrong shape or refer to missing vertices."),
+    ProblemType("unauthorized", 401, "Unauthorized",
+                "The request has no API key, or one the service does not accept; send "
+                "'Authorization: Bearer <key>'."),
     ProblemType("too-large", 413, "Request too large",
                 "The request body is larger than the configured limit."),
+    ProblemType("cloud-too-large", 413, "Cloud too large",
+                "The cloud has more points than the service accepts (CURVATURE_MAX_POINTS)."),
     ProblemType("too-many-points", 413, "Too many points for a synchronous answer",
                 "The cloud is larger than the synchronous limit; submit it as a job."),
     ProblemType("job-not-found", 404, "Job not found",
@@ -58,8 +63,19 @@ _TYPES = [
     ProblemType("job-cancelled", 409, "Job cancelled", "The job was cancelled; it has no result."),
     ProblemType("not-acceptable", 406, "Not acceptable",
                 "No result format matches the Accept header or the format parameter."),
+    ProblemType("too-many-jobs", 429, "Too many jobs",
+                "This API key has too many unfinished jobs; retry after Retry-After seconds, "
+                "or cancel some."),
     ProblemType("queue-full", 503, "Queue full",
                 "Too many unfinished jobs or waiting requests; retry after Retry-After seconds."),
+    ProblemType("store-busy", 503, "Job store busy",
+                "The job store stayed locked longer than its timeout; nothing was changed. "
+                "Retry after Retry-After seconds."),
+    ProblemType("insufficient-storage", 507, "Insufficient storage",
+                "The server's disk is full; nothing was stored. Retry later."),
+    ProblemType("time-limit", 422, "Time limit exceeded",
+                "The job ran longer than the per-job time limit; use a smaller cloud or "
+                "cheaper parameters."),
     ProblemType("not-ready", 503, "Service not ready",
                 "The service is starting or its job store or worker pool is unavailable."),
     ProblemType("worker-crashed", 500, "Worker crashed",

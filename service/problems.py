@@ -17,6 +17,7 @@ from starlette.exceptions import HTTPException as StarletteHTTPException
 from starlette.types import ASGIApp, Receive, Scope, Send
 
 from .problem_types import PROBLEM_TYPES, ProblemError
+from .storage_errors import storage_problem
 
 log = logging.getLogger("service")
 
@@ -71,7 +72,7 @@ def validation_errors(errors: list[dict], prefix: tuple = ()) -> list[dict]:
 
 
 async def _problem_error(request: Request, exc: ProblemError) -> JSONResponse:
-    headers = getattr(exc, "headers", None)
+    headers = getattr(exc, "headers", None) or _retry_after(request, exc.slug)
     extensions = getattr(exc, "extensions", {})
     return problem_response(request, exc.slug, exc.detail, headers=headers, **extensions)
 
@@ -120,14 +121,33 @@ class CatchAllMiddleware:
 
         try:
             await self.app(scope, receive, tracking_send)
-        except Exception:
-            log.exception("unhandled error on %s %s", scope.get("method"), scope.get("path"))
+        except Exception as exc:
+            # A full disk or a locked store is the operator's problem, not a bug: the client
+            # gets a 507/503 it can act on. Both leave the store and files consistent.
+            known = storage_problem(exc, f"answering {scope.get('method')} {scope.get('path')}")
+            if known is None:
+                log.exception("unhandled error on %s %s", scope.get("method"),
+                              scope.get("path"))
+            else:
+                log.error("%s on %s %s: %s", known.slug, scope.get("method"),
+                          scope.get("path"), exc)
             if started:
                 return
             request = Request(scope)
-            response = problem_response(request, "internal-error",
-                                        PROBLEM_TYPES["internal-error"].description)
+            if known is None:
+                response = problem_response(request, "internal-error",
+                                            PROBLEM_TYPES["internal-error"].description)
+            else:
+                response = problem_response(request, known.slug, known.detail,
+                                            headers=_retry_after(request, known.slug))
             await response(scope, receive, send)
+
+
+def _retry_after(request: Request, slug: str) -> dict[str, str] | None:
+    if PROBLEM_TYPES[slug].status != 503:
+        return None
+    settings = getattr(request.app.state, "settings", None)
+    return {"Retry-After": str(getattr(settings, "retry_after_seconds", 5))}
 
 
 def install(app: FastAPI) -> None:

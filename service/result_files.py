@@ -36,9 +36,14 @@ def save_canonical(result, path: Path) -> None:
         arrays["faces"] = result.faces
     arrays["info"] = np.array(json.dumps(result.info or {}, default=_jsonable))
     tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
-    with open(tmp, "wb") as fh:
-        np.savez(fh, **arrays)
-    os.replace(tmp, path)
+    try:
+        with open(tmp, "wb") as fh:
+            np.savez(fh, **arrays)
+        os.replace(tmp, path)
+    except BaseException:
+        # A full disk must not leave a partial file behind to fill it further.
+        tmp.unlink(missing_ok=True)
+        raise
 
 
 def load_canonical(path: Path):

@@ -2,8 +2,10 @@
 
 Each neighborhood method of ``curvature.FINDERS`` gets a model whose fields, defaults and
 bounds come from the method's ``ParamSpec`` tuple at import time, plus the fields every method
-shares (fit model, solver, orientation, viewpoint). The models form a union discriminated by
-``method``, so a new method in the core appears in the API and in OpenAPI by itself.
+shares (fit model, solver, orientation, viewpoint); method "auto" (the default, which picks its
+own fit and scale) gets its ``curvature.AUTO_PARAMS`` and the orientation fields. The models
+form a union discriminated by ``method``, so a new method in the core appears in the API and
+in OpenAPI by itself.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ from curvature import ParamSpec
 from .formats import INPUT_EXTENSIONS, RESULT_FORMATS
 from .store import STATUSES
 
-DEFAULT_METHOD = "knn"
+DEFAULT_METHOD = curvature.DEFAULT_METHOD
 
 FIT_PARAMS: tuple[ParamSpec, ...] = tuple(curvature.FIT_PARAMS)
 # Parameters that only make sense for one fit model.
@@ -43,13 +45,11 @@ def _field(spec: ParamSpec, default: Any) -> Any:
     return Field(default, description=spec.help or None, **bounds)
 
 
-class CommonParams(BaseModel):
-    """Fields every method shares: fit model, orientation and viewpoint."""
+class OrientationParams(BaseModel):
+    """Fields every method shares: orientation and viewpoint."""
 
     model_config = ConfigDict(extra="forbid")
 
-    fit: Literal[tuple(curvature.FITS)] = Field(
-        "implicit", description="Quadric model fitted to each neighborhood.")
     orientation: Literal[tuple(curvature.ORIENTATIONS)] | None = Field(
         None, description="How normals are oriented (signs of k1, k2, H). Default: 'normals' "
         "when the input has normals, 'viewpoint' when a viewpoint is given, else 'auto'.")
@@ -64,12 +64,23 @@ class CommonParams(BaseModel):
         return value
 
     @model_validator(mode="after")
+    def _viewpoint_given(self):
+        if self.orientation == "viewpoint" and self.viewpoint is None:
+            raise ValueError("orientation 'viewpoint' needs a 'viewpoint'")
+        return self
+
+
+class CommonParams(OrientationParams):
+    """Fields every neighborhood method shares: fit model, orientation and viewpoint."""
+
+    fit: Literal[tuple(curvature.FITS)] = Field(
+        "implicit", description="Quadric model fitted to each neighborhood.")
+
+    @model_validator(mode="after")
     def _consistent(self):
         for name, only_fit in FIT_ONLY.items():
             if getattr(self, name, None) is not None and self.fit != only_fit:
                 raise ValueError(f"'{name}' applies to fit '{only_fit}' only")
-        if self.orientation == "viewpoint" and self.viewpoint is None:
-            raise ValueError("orientation 'viewpoint' needs a 'viewpoint'")
         return self
 
 
@@ -96,8 +107,22 @@ def _method_model(name: str, finder: type) -> type[BaseModel]:
     return model
 
 
+AUTO_DESCRIPTION = ("Measures the cloud's noise and spacing and picks model and scale itself: "
+                    "the implicit quadric on clean clouds, normal-field regression over large "
+                    "neighborhoods on noisy ones.")
+
+
+def _auto_model() -> type[BaseModel]:
+    fields: dict[str, Any] = {"method": (Literal["auto"], Field(description="Method."))}
+    for spec in curvature.AUTO_PARAMS:
+        fields[spec.name] = (_annotation(spec), _field(spec, spec.default))
+    return create_model("AutoParams", __base__=OrientationParams,
+                        __doc__=f"Parameters of method 'auto'. {AUTO_DESCRIPTION}", **fields)
+
+
 METHOD_MODELS: dict[str, type[BaseModel]] = {
-    name: _method_model(name, finder) for name, finder in sorted(curvature.FINDERS.items())}
+    "auto": _auto_model(),
+    **{name: _method_model(name, finder) for name, finder in sorted(curvature.FINDERS.items())}}
 
 if len(METHOD_MODELS) > 1:
     MethodParams = Annotated[Union[tuple(METHOD_MODELS.values())],  # noqa: UP007
@@ -121,7 +146,8 @@ class CloudRequest(BaseModel):
 
     model_config = ConfigDict(extra="forbid")
 
-    points: list[Vector3] = Field(description="Coordinates, one [x, y, z] per point.")
+    points: list[Vector3] = Field(min_length=10, description=(
+        "Coordinates, one [x, y, z] per point; at least 10 points."))
     normals: list[Vector3] | None = Field(
         None, description="Optional per-point normals, same length as points.")
     faces: list[tuple[int, int, int]] | None = Field(
@@ -245,7 +271,8 @@ def parameter_info(spec: ParamSpec, applies_to_fit: str | None = None) -> Parame
 
 def methods_response() -> MethodsResponse:
     """Everything GET /v1/methods reports, from the core's specs."""
-    methods = []
+    methods = [MethodInfo(name="auto", description=AUTO_DESCRIPTION,
+                          parameters=[parameter_info(s) for s in curvature.AUTO_PARAMS])]
     for name, finder in sorted(curvature.FINDERS.items()):
         doc = (finder.__doc__ or "").strip().splitlines()
         methods.append(MethodInfo(name=name, description=doc[0] if doc else "",

@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 from typing import Literal
 
-from pydantic import Field
+from pydantic import Field, SecretStr
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 # forkserver forks workers from a small clean process that has already imported numpy/numba,
@@ -29,6 +29,16 @@ class Settings(BaseSettings):
     data_dir: Path = Field(Path("data"), description="Job store, inputs and results live here.")
     log_level: Literal["debug", "info", "warning", "error"] = "info"
 
+    api_keys: SecretStr | None = Field(
+        None, description="Comma-separated API keys accepted as 'Authorization: Bearer <key>'. "
+        "Without any key (here or in api_keys_file) the service is open and listens on "
+        "loopback only.")
+    api_keys_file: Path | None = Field(
+        None, description="File with one API key a line ('#' comments and blank lines "
+        "ignored); adds to api_keys.")
+    allow_open: bool = Field(
+        False, description="Allow listening on a non-loopback address without API keys.")
+
     executor: Literal["local", "dask"] = Field(
         "local", description="'local': process pool on this machine; 'dask': not available yet.")
     dask_address: str | None = Field(None, description="Scheduler address for executor 'dask'.")
@@ -49,8 +59,19 @@ class Settings(BaseSettings):
         50_000, ge=10, description="Largest cloud POST /v1/curvature answers synchronously.")
     max_pending_sync: int = Field(
         8, ge=1, description="Synchronous requests allowed to wait for a worker at once.")
+    max_points: int = Field(
+        10_000_000, ge=10, description="Largest cloud a job accepts (points).")
     max_queued_jobs: int = Field(
         1000, ge=1, description="Unfinished jobs accepted before answering 503.")
+    max_jobs_per_key: int = Field(
+        100, ge=1, description="Unfinished jobs one API key may have before answering 429.")
+    job_time_limit_seconds: float = Field(
+        3600, gt=0, description="A run longer than this fails the job ('time-limit').")
+    time_limit_grace_seconds: float = Field(
+        10, ge=0, description="Past the time limit plus this, a run that did not stop by "
+        "itself is ended by killing the worker pool.")
+    store_busy_timeout_seconds: float = Field(
+        30, gt=0, description="How long a store operation waits for a locked SQLite file.")
     max_attempts: int = Field(
         3, ge=1, description="Runs of one job (crashes, restarts) before it is marked failed.")
     retry_after_seconds: int = Field(5, ge=1, description="Retry-After sent with 503.")

@@ -13,7 +13,7 @@ import sqlite3
 import time
 import uuid
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -96,16 +96,34 @@ def new_job_id() -> str:
     return uuid.uuid4().hex
 
 
-def connect(db_path: str | Path) -> sqlite3.Connection:
+class QueueLimitError(Exception):
+    """A new job would exceed a queue limit; nothing was inserted.
+
+    Attributes
+    ----------
+    scope : {"owner", "total"}
+        Which limit: the owner's unfinished jobs, or all unfinished jobs.
+    count, limit : int
+        Unfinished jobs now, and the limit.
+    """
+
+    def __init__(self, scope: str, count: int, limit: int):
+        super().__init__(scope, count, limit)
+        self.scope, self.count, self.limit = scope, count, limit
+
+
+def connect(db_path: str | Path, busy_timeout: float = 30.0) -> sqlite3.Connection:
     """Open a connection in autocommit mode; transactions are explicit (``BEGIN IMMEDIATE``).
 
     ``synchronous=FULL`` makes every commit durable even against power loss; commits are few
-    (a handful per job plus throttled progress), so the fsyncs are cheap.
+    (a handful per job plus throttled progress), so the fsyncs are cheap. A lock held by
+    another connection is waited for up to ``busy_timeout`` seconds, then the operation
+    raises ``sqlite3.OperationalError`` (database is locked) having changed nothing.
     """
-    conn = sqlite3.connect(str(db_path), timeout=30.0, isolation_level=None,
+    conn = sqlite3.connect(str(db_path), timeout=busy_timeout, isolation_level=None,
                            check_same_thread=False)
     conn.row_factory = sqlite3.Row
-    conn.execute("PRAGMA busy_timeout = 30000")
+    conn.execute(f"PRAGMA busy_timeout = {int(busy_timeout * 1000)}")
     conn.execute("PRAGMA synchronous = FULL")
     conn.execute("PRAGMA foreign_keys = ON")
     return conn
@@ -121,14 +139,17 @@ class JobStore:
     ----------
     db_path : path
         The SQLite file; created with its folder by :meth:`initialize`.
+    busy_timeout : float
+        Seconds an operation waits for a lock held elsewhere before it fails.
     """
 
-    def __init__(self, db_path: str | Path):
+    def __init__(self, db_path: str | Path, busy_timeout: float = 30.0):
         self.db_path = Path(db_path)
+        self.busy_timeout = busy_timeout
 
     @contextmanager
     def _conn(self) -> Iterator[sqlite3.Connection]:
-        conn = connect(self.db_path)
+        conn = connect(self.db_path, self.busy_timeout)
         try:
             yield conn
         finally:
@@ -141,7 +162,11 @@ class JobStore:
             try:
                 yield conn
             except BaseException:
-                conn.execute("ROLLBACK")
+                # SQLite rolls back by itself on some errors (SQLITE_FULL among them); a
+                # second ROLLBACK would fail and hide the error that matters.
+                if conn.in_transaction:
+                    with suppress(sqlite3.Error):
+                        conn.execute("ROLLBACK")
                 raise
             conn.execute("COMMIT")
 
@@ -166,11 +191,12 @@ class JobStore:
         except sqlite3.Error:
             return False
 
-    def requeue_interrupted(self, max_attempts: int, error: dict) -> tuple[int, int]:
+    def requeue_interrupted(self, max_attempts: int, error: dict,
+                            ttl: float | None = None) -> tuple[int, int]:
         """After a restart: put jobs left ``running`` back in the queue.
 
-        A job that already used ``max_attempts`` runs is marked failed with ``error`` instead,
-        so a job that kills its worker cannot loop forever.
+        A job that already used ``max_attempts`` runs is marked failed with ``error`` instead
+        (kept for ``ttl`` seconds), so a job that kills its worker cannot loop forever.
 
         Returns
         -------
@@ -179,9 +205,10 @@ class JobStore:
         now = time.time()
         with self._transaction() as conn:
             failed = conn.execute(
-                "UPDATE jobs SET status = ?, finished_at = ?, error = ?, run_token = NULL "
-                "WHERE status = ? AND attempts >= ?",
-                (FAILED, now, json.dumps(error), RUNNING, max_attempts)).rowcount
+                "UPDATE jobs SET status = ?, finished_at = ?, expires_at = ?, error = ?, "
+                "run_token = NULL WHERE status = ? AND attempts >= ?",
+                (FAILED, now, None if ttl is None else now + ttl, json.dumps(error), RUNNING,
+                 max_attempts)).rowcount
             requeued = conn.execute(
                 "UPDATE jobs SET status = ?, progress = 0, run_token = NULL WHERE status = ?",
                 (QUEUED, RUNNING)).rowcount
@@ -191,9 +218,31 @@ class JobStore:
 
     def insert(self, *, job_id: str, owner: str, params: dict, input_kind: str,
                input_file: str, input_name: str | None, input_format: str | None,
-               input_bytes: int, n_points: int | None) -> Job:
-        """Commit a new ``queued`` job and return it."""
+               input_bytes: int, n_points: int | None, max_unfinished: int | None = None,
+               max_owner_unfinished: int | None = None) -> Job:
+        """Commit a new ``queued`` job and return it.
+
+        The limits are checked in the same write transaction as the insert, so concurrent
+        submissions cannot overshoot them.
+
+        Raises
+        ------
+        QueueLimitError
+            The owner already has ``max_owner_unfinished`` unfinished jobs, or the store
+            ``max_unfinished``.
+        """
         with self._transaction() as conn:
+            if max_owner_unfinished is not None:
+                count = conn.execute(
+                    "SELECT COUNT(*) FROM jobs WHERE owner = ? AND status IN (?, ?)",
+                    (owner, QUEUED, RUNNING)).fetchone()[0]
+                if count >= max_owner_unfinished:
+                    raise QueueLimitError("owner", count, max_owner_unfinished)
+            if max_unfinished is not None:
+                count = conn.execute("SELECT COUNT(*) FROM jobs WHERE status IN (?, ?)",
+                                     (QUEUED, RUNNING)).fetchone()[0]
+                if count >= max_unfinished:
+                    raise QueueLimitError("total", count, max_unfinished)
             conn.execute(
                 "INSERT INTO jobs (id, owner, status, params, input_kind, input_file, "
                 "input_name, input_format, input_bytes, n_points, created_at) "
@@ -225,10 +274,15 @@ class JobStore:
             rows = conn.execute(sql, args).fetchall()
         return [Job.from_row(r) for r in rows]
 
-    def count_unfinished(self) -> int:
+    def count_unfinished(self, owner: str | None = None) -> int:
+        """Queued and running jobs, of ``owner`` or of everyone."""
+        sql = "SELECT COUNT(*) FROM jobs WHERE status IN (?, ?)"
+        args: list[Any] = [QUEUED, RUNNING]
+        if owner is not None:
+            sql += " AND owner = ?"
+            args.append(owner)
         with self._conn() as conn:
-            return conn.execute("SELECT COUNT(*) FROM jobs WHERE status IN (?, ?)",
-                                (QUEUED, RUNNING)).fetchone()[0]
+            return conn.execute(sql, args).fetchone()[0]
 
     def count_by_status(self) -> dict[str, int]:
         with self._conn() as conn:
@@ -262,24 +316,52 @@ class JobStore:
         with self._transaction() as conn:
             return conn.execute("DELETE FROM jobs WHERE id = ?", (job_id,)).rowcount > 0
 
-    def requeue_after_crash(self, job_id: str, max_attempts: int, error: dict) -> str | None:
+    def requeue_after_crash(self, job_id: str, run_token: str | None, max_attempts: int,
+                            error: dict, *, count_attempt: bool = True,
+                            ttl: float | None = None) -> str | None:
         """The worker of a running job died: queue it again, or fail it after too many runs.
 
-        Returns the new status, or ``None`` when the job was no longer running.
+        Parameters
+        ----------
+        job_id, run_token : str
+            The job and the run that died; a later run of the same job is left alone.
+        max_attempts : int
+            Runs after which the job fails with ``error`` instead.
+        count_attempt : bool
+            False when the run was ended on purpose for another job's sake (the pool was
+            killed to stop a run past its time limit): the run is not held against this job.
+        ttl : float, optional
+            Retention of a job failed here.
+
+        Returns
+        -------
+        str or None
+            The new status, or ``None`` when this run no longer owned a running job.
         """
         with self._transaction() as conn:
-            row = conn.execute("SELECT status, attempts FROM jobs WHERE id = ?",
+            row = conn.execute("SELECT status, attempts, run_token FROM jobs WHERE id = ?",
                                (job_id,)).fetchone()
-            if row is None or row["status"] != RUNNING:
+            if row is None or row["status"] != RUNNING or row["run_token"] != run_token:
                 return None
-            if row["attempts"] >= max_attempts:
+            attempts = row["attempts"] - (0 if count_attempt else 1)
+            if attempts >= max_attempts:
+                now = time.time()
                 conn.execute(
-                    "UPDATE jobs SET status = ?, finished_at = ?, error = ?, run_token = NULL "
-                    "WHERE id = ?", (FAILED, time.time(), json.dumps(error), job_id))
+                    "UPDATE jobs SET status = ?, finished_at = ?, expires_at = ?, error = ?, "
+                    "run_token = NULL WHERE id = ?",
+                    (FAILED, now, None if ttl is None else now + ttl, json.dumps(error),
+                     job_id))
                 return FAILED
-            conn.execute("UPDATE jobs SET status = ?, progress = 0, run_token = NULL "
-                         "WHERE id = ?", (QUEUED, job_id))
+            conn.execute("UPDATE jobs SET status = ?, progress = 0, attempts = ?, "
+                         "run_token = NULL WHERE id = ?", (QUEUED, attempts, job_id))
             return QUEUED
+
+    def running(self) -> list[tuple[str, str | None, float | None]]:
+        """``(id, run_token, started_at)`` of every running job."""
+        with self._conn() as conn:
+            rows = conn.execute("SELECT id, run_token, started_at FROM jobs WHERE status = ?",
+                                (RUNNING,)).fetchall()
+        return [(r[0], r[1], r[2]) for r in rows]
 
     def expired(self, now: float) -> list[str]:
         """Ids of final jobs whose retention time has passed."""
@@ -288,6 +370,13 @@ class JobStore:
                 "SELECT id FROM jobs WHERE expires_at IS NOT NULL AND expires_at <= ? "
                 "AND status IN (?, ?, ?)", (now, *FINAL_STATUSES)).fetchall()
         return [r[0] for r in rows]
+
+    def delete_expired(self, job_id: str, now: float) -> bool:
+        """Delete a job only if it is still final and expired (checked in the same step)."""
+        with self._transaction() as conn:
+            return conn.execute(
+                "DELETE FROM jobs WHERE id = ? AND expires_at IS NOT NULL AND expires_at <= ? "
+                "AND status IN (?, ?, ?)", (job_id, now, *FINAL_STATUSES)).rowcount > 0
 
     def all_ids(self) -> set[str]:
         with self._conn() as conn:

@@ -64,6 +64,23 @@ class ReceivedInput:
     n_points: int | None = None
 
 
+def parse_json(raw: bytes, slug: str, what: str) -> Any:
+    """Decode JSON from a client; every way it can fail is a ``slug`` problem.
+
+    Besides syntax errors this covers nesting deeper than the parser's recursion limit and
+    integers longer than Python converts (both raise other exceptions than JSONDecodeError).
+    Memory stays bounded by the body limit the caller enforced.
+    """
+    try:
+        return json.loads(raw)
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise HTTPProblem(slug, f"{what}: not valid JSON ({exc})") from None
+    except RecursionError:
+        raise HTTPProblem(slug, f"{what}: JSON nested too deeply") from None
+    except ValueError as exc:  # e.g. an integer literal of more than 4300 digits
+        raise HTTPProblem(slug, f"{what}: a JSON value cannot be read ({exc})") from None
+
+
 def parse_params(raw: Any) -> dict:
     """Validate method and fit parameters; ``None`` gives the defaults."""
     if raw is None:
@@ -85,9 +102,11 @@ def parse_params(raw: Any) -> dict:
 
 
 def _check_declared_length(request: Request, limit: int) -> None:
-    declared = request.headers.get("content-length")
-    if declared is not None and declared.isdigit() and int(declared) > limit:
-        raise HTTPProblem("too-large", f"the body has {int(declared)} bytes; the limit is "
+    declared = request.headers.get("content-length", "").strip()
+    # ASCII digits only, and few enough for int(): the server rejects other values anyway.
+    if declared.isascii() and declared.isdigit() and (len(declared) > 18
+                                                      or int(declared) > limit):
+        raise HTTPProblem("too-large", f"the body announces {declared} bytes; the limit is "
                           f"{limit} bytes")
 
 
@@ -241,10 +260,7 @@ async def _receive_multipart(request: Request, folder: Path, boundary: bytes | N
         raise HTTPProblem("invalid-request", "missing form part 'file' (the cloud file)")
     raw_params = None
     if sink.params is not None and sink.params.strip():
-        try:
-            raw_params = json.loads(bytes(sink.params))
-        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-            raise HTTPProblem("invalid-parameters", f"params: not valid JSON ({exc})") from None
+        raw_params = parse_json(bytes(sink.params), "invalid-parameters", "params")
     params = parse_params(raw_params)
     ext = extension_of(sink.filename)
     input_file = f"input.{ext}"
@@ -268,7 +284,7 @@ async def _read_limited(request: Request, limit: int) -> bytes:
 def _as_array(value: Any, name: str, dtype) -> np.ndarray:
     try:
         arr = np.asarray(value, dtype=dtype)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):  # overflow: an integer beyond float range
         raise HTTPProblem("invalid-cloud", f"{name}: expected a list of [x, y, z] number "
                           "triples") from None
     if arr.ndim != 2 or arr.shape[1] != 3:
@@ -279,10 +295,7 @@ def _as_array(value: Any, name: str, dtype) -> np.ndarray:
 
 def _decode_cloud(body: bytes, folder: Path) -> tuple[dict, int]:
     """Parse, check and store the JSON cloud (runs in a thread: it can be big)."""
-    try:
-        doc = json.loads(body)
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise HTTPProblem("malformed-request", f"the body is not valid JSON ({exc})") from None
+    doc = parse_json(body, "malformed-request", "the body")
     if not isinstance(doc, dict):
         raise HTTPProblem("invalid-request", "the body must be a JSON object with 'points'")
     unknown = sorted(set(doc) - _JSON_KEYS)
@@ -297,11 +310,15 @@ def _decode_cloud(body: bytes, folder: Path) -> tuple[dict, int]:
     normals = None if doc.get("normals") is None else _as_array(doc["normals"], "normals",
                                                                 np.float64)
     faces = None
-    if doc.get("faces") is not None and len(doc["faces"]):
+    if doc.get("faces") is not None and not isinstance(doc["faces"], list):
+        raise HTTPProblem("invalid-cloud", "faces: expected a list of [i, j, k] index triples")
+    if doc.get("faces"):
         faces = _as_array(doc["faces"], "faces", np.float64)
         if not np.all(np.isfinite(faces)) or not np.all(faces == np.round(faces)):
             raise HTTPProblem("invalid-cloud", "faces: vertex indices must be whole numbers")
-        faces = faces.astype(np.int64)
+        # Clipped first so huge values cast cleanly; they stay out of range and are named
+        # by the range check below.
+        faces = np.clip(faces, -1, np.iinfo(np.int64).max // 2).astype(np.int64)
     try:
         check_cloud(CloudInput(points=points, normals=normals, faces=faces))
     except ProblemError as exc:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import logging
 import os
 import select
+import sqlite3
 import sys
 import threading
 import time
@@ -23,6 +24,7 @@ import curvature
 from .inputs import CloudInput, check_cloud, load_input
 from .problem_types import ProblemError
 from .result_files import CANONICAL_RESULT, save_canonical, write_result
+from .storage_errors import storage_problem
 from .store import CANCELLED, FAILED, SUCCEEDED, JobStore
 
 log = logging.getLogger("service.worker")
@@ -35,6 +37,13 @@ _LOADED, _ESTIMATED = 0.05, 0.95
 
 class JobAborted(Exception):
     """Raised from the progress callback when the job was cancelled or taken over."""
+
+
+def time_limit_problem(limit: float) -> ProblemError:
+    """The error of a job that ran past its time limit."""
+    return ProblemError("time-limit", f"the job ran for more than {limit:g} s, the per-job "
+                        "time limit (CURVATURE_JOB_TIME_LIMIT_SECONDS); use a smaller cloud "
+                        "or cheaper parameters")
 
 
 def init_worker(log_level: str = "INFO", server_pid: int | None = None) -> None:
@@ -102,7 +111,8 @@ def compute(cloud: CloudInput, params: dict, workers: int, progress=None):
     """
     p = dict(params)
     method = p.pop("method")
-    common = {"fit": p.pop("fit", "implicit"), "orientation": p.pop("orientation", None),
+    # "auto" has no fit field: it picks its own.
+    common = {"fit": p.pop("fit", None), "orientation": p.pop("orientation", None),
               "viewpoint": p.pop("viewpoint", None)}
     solver = p.pop("solver", None)
     if solver is not None:
@@ -128,11 +138,24 @@ def summarize(result, cloud: CloudInput, seconds: float) -> dict:
 
 
 class ProgressReporter:
-    """Throttled progress writes that double as the cancellation check."""
+    """Throttled progress writes that double as the cancellation and time-limit checks.
 
-    def __init__(self, store: JobStore, job_id: str, run_token: str, interval: float):
+    Parameters
+    ----------
+    store : JobStore
+    job_id, run_token : str
+    interval : float
+        Minimum seconds between two progress writes.
+    time_limit : float, optional
+        Seconds from now after which the next call raises the ``time-limit`` problem.
+    """
+
+    def __init__(self, store: JobStore, job_id: str, run_token: str, interval: float,
+                 time_limit: float | None = None):
         self.store, self.job_id, self.run_token = store, job_id, run_token
         self.interval = interval
+        self.time_limit = time_limit
+        self.deadline = float("inf") if time_limit is None else time.monotonic() + time_limit
         self.last = -float("inf")
         self.aborted = False
 
@@ -140,10 +163,21 @@ class ProgressReporter:
         now = time.monotonic()
         if self.aborted:
             raise JobAborted(self.job_id)
+        if now > self.deadline:
+            # Stopping here is clean; the executor kills the pool only if this is never
+            # reached (a long stretch without progress calls).
+            raise time_limit_problem(self.time_limit)
         if not force and now - self.last < self.interval:
             return
         self.last = now
-        if not self.store.report_progress(self.job_id, self.run_token, fraction):
+        try:
+            owned = self.store.report_progress(self.job_id, self.run_token, fraction)
+        except sqlite3.OperationalError as exc:
+            # Progress is advisory: a store locked past its timeout skips one report rather
+            # than failing a computation that may be nearly done.
+            log.warning("job %s: progress not stored (%s)", self.job_id, exc)
+            return
+        if not owned:
             self.aborted = True
             raise JobAborted(self.job_id)
 
@@ -162,25 +196,28 @@ def run_job(db_path: str, jobs_dir: str, job_id: str, run_token: str, options: d
     job_id, run_token : str
         The job, and the token that fences this run against stale ones.
     options : dict
-        ``estimate_workers``, ``progress_interval``, ``result_ttl``.
+        ``estimate_workers``, ``progress_interval``, ``result_ttl``, and optionally
+        ``time_limit`` (seconds), ``max_points`` and ``busy_timeout`` (seconds).
 
     Returns
     -------
     str
         The status this run left the job in, or ``"skipped"`` if it was no longer queued.
     """
-    store = JobStore(db_path)
+    store = JobStore(db_path, options.get("busy_timeout", 30.0))
     job = store.claim(job_id, run_token)
     if job is None:
         return "skipped"
     folder = Path(jobs_dir) / job_id
-    reporter = ProgressReporter(store, job_id, run_token, options["progress_interval"])
+    reporter = ProgressReporter(store, job_id, run_token, options["progress_interval"],
+                                options.get("time_limit"))
     ttl = options["result_ttl"]
     started = time.perf_counter()
     try:
         cloud = load_input(folder / job.input_file, job.input_kind, job.input_name)
         check_cloud(cloud)
         store.set_points(job_id, run_token, len(cloud.points))
+        check_point_limit(len(cloud.points), options.get("max_points"))
         reporter(_LOADED, force=True)
         result = compute(cloud, job.params, options["estimate_workers"], reporter.on_estimate)
         if reporter.aborted:
@@ -204,11 +241,30 @@ def run_job(db_path: str, jobs_dir: str, job_id: str, run_token: str, options: d
         store.finish(job_id, run_token, status=FAILED, ttl=ttl, error=ProblemError(
             "internal-error", "the worker ran out of memory for this cloud").to_dict())
         return FAILED
+    except (OSError, sqlite3.OperationalError) as exc:
+        problem = storage_problem(exc, "running the job")
+        if problem is None:
+            log.exception("job %s failed unexpectedly", job_id)
+            problem = ProblemError("internal-error", INTERNAL_ERROR_DETAIL)
+        else:
+            log.error("job %s: %s", job_id, exc)
+        (folder / CANONICAL_RESULT).unlink(missing_ok=True)
+        # If the store cannot take this either, the exception leaves the worker and the
+        # executor re-queues the run.
+        store.finish(job_id, run_token, status=FAILED, ttl=ttl, error=problem.to_dict())
+        return FAILED
     except Exception:
         log.exception("job %s failed unexpectedly", job_id)
         store.finish(job_id, run_token, status=FAILED, ttl=ttl,
                      error=ProblemError("internal-error", INTERNAL_ERROR_DETAIL).to_dict())
         return FAILED
+
+
+def check_point_limit(n_points: int, max_points: int | None) -> None:
+    """Refuse clouds above the service's point limit before any estimate runs."""
+    if max_points is not None and n_points > max_points:
+        raise ProblemError("cloud-too-large", f"the cloud has {n_points} points; this service "
+                           f"accepts at most {max_points} (CURVATURE_MAX_POINTS)")
 
 
 def run_sync(input_path: str, kind: str, display_name: str | None, params: dict, fmt: str,
@@ -232,7 +288,10 @@ def run_sync(input_path: str, kind: str, display_name: str | None, params: dict,
         write_result(result, target, fmt)
     except ProblemError:
         raise
-    except Exception:
+    except Exception as exc:
+        problem = storage_problem(exc, "writing the result")
+        if problem is not None:
+            raise problem from None
         log.exception("synchronous request failed unexpectedly")
         raise ProblemError("internal-error", INTERNAL_ERROR_DETAIL) from None
     return str(target)

@@ -10,7 +10,7 @@ from fastapi import APIRouter, Depends, Query, Request
 from fastapi.responses import FileResponse
 from starlette.background import BackgroundTask
 
-from ..dependencies import get_executor, get_metrics, get_settings
+from ..dependencies import get_executor, get_metrics, get_settings, owner_id
 from ..executor import LocalPoolExecutor
 from ..formats import RESULT_MEDIA_TYPES
 from ..metrics import ServiceMetrics
@@ -20,7 +20,9 @@ from ..settings import Settings
 from ..uploads import receive_cloud
 from .jobs import CLOUD_BODY, RESULT_CONTENT, ResultFormat
 
-router = APIRouter(prefix="/v1", tags=["curvature"])
+# Computing costs the operator: only holders of a key may ask (when keys are configured).
+router = APIRouter(prefix="/v1", tags=["curvature"], dependencies=[Depends(owner_id)],
+                   responses=problem_responses("unauthorized"))
 
 
 @router.post(
@@ -32,7 +34,7 @@ router = APIRouter(prefix="/v1", tags=["curvature"])
                **problem_responses("malformed-request", "invalid-request", "invalid-parameters",
                                    "malformed-file", "non-finite-coordinates", "too-few-points",
                                    "too-large", "too-many-points", "unknown-format",
-                                   "not-acceptable", "queue-full")},
+                                   "not-acceptable", "queue-full", "insufficient-storage")},
 )
 async def curvature_now(
     request: Request,
@@ -50,18 +52,20 @@ async def curvature_now(
         raise HTTPProblem(
             "queue-full", f"{executor.sync_waiting} synchronous requests are already waiting",
             headers={"Retry-After": str(settings.retry_after_seconds)})
-    folder = settings.tmp_dir / uuid.uuid4().hex
-    folder.mkdir(parents=True)
+    name = uuid.uuid4().hex
+    folder = settings.tmp_dir / name
     try:
-        received = await receive_cloud(request, folder, settings)
-        if received.n_points is not None and received.n_points > settings.sync_max_points:
-            raise HTTPProblem("too-many-points", (
-                f"the cloud has {received.n_points} points; synchronous answers are limited "
-                f"to {settings.sync_max_points}; submit it to POST /v1/jobs"))
-        path = await executor.run_sync(
-            str(folder / received.input_file), received.kind, received.filename,
-            received.params, fmt, str(folder), settings.sync_max_points,
-            settings.estimate_workers)
+        with request.app.state.busy_folders.hold(name):
+            folder.mkdir(parents=True)
+            received = await receive_cloud(request, folder, settings)
+            if received.n_points is not None and received.n_points > settings.sync_max_points:
+                raise HTTPProblem("too-many-points", (
+                    f"the cloud has {received.n_points} points; synchronous answers are "
+                    f"limited to {settings.sync_max_points}; submit it to POST /v1/jobs"))
+            path = await executor.run_sync(
+                str(folder / received.input_file), received.kind, received.filename,
+                received.params, fmt, str(folder), settings.sync_max_points,
+                settings.estimate_workers)
     except BaseException:
         shutil.rmtree(folder, ignore_errors=True)
         raise

@@ -10,7 +10,7 @@ from fastapi import APIRouter, Depends, Query, Request, Response
 from fastapi.responses import FileResponse
 
 from ..cleanup import remove_job_files
-from ..dependencies import client_id, get_executor, get_metrics, get_settings, get_store
+from ..dependencies import get_executor, get_metrics, get_settings, get_store, owner_id
 from ..executor import LocalPoolExecutor
 from ..formats import RESULT_FORMATS, RESULT_MEDIA_TYPES
 from ..metrics import ServiceMetrics
@@ -18,11 +18,22 @@ from ..problems import HTTPProblem, problem_responses
 from ..results import content_disposition, media_type, negotiate
 from ..schemas import Job, JobError, JobInput, JobPage, JobResult, timestamp
 from ..settings import Settings
-from ..store import CANCELLED, FAILED, QUEUED, RUNNING, STATUSES, SUCCEEDED, JobStore, new_job_id
+from ..store import (
+    CANCELLED,
+    FAILED,
+    QUEUED,
+    RUNNING,
+    STATUSES,
+    SUCCEEDED,
+    JobStore,
+    QueueLimitError,
+    new_job_id,
+)
 from ..store import Job as JobRecord
 from ..uploads import receive_cloud
 
-router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
+router = APIRouter(prefix="/v1/jobs", tags=["jobs"],
+                   responses=problem_responses("unauthorized", "not-ready", "store-busy"))
 
 CLOUD_BODY = {"requestBody": {"required": True, "content": {
     "multipart/form-data": {"schema": {"$ref": "#/components/schemas/MultipartCloudRequest"}},
@@ -30,6 +41,17 @@ CLOUD_BODY = {"requestBody": {"required": True, "content": {
 }}}
 RESULT_CONTENT = {RESULT_MEDIA_TYPES[f].split(";")[0]: {"schema": {
     "type": "string", "format": "binary"}} for f in RESULT_FORMATS}
+# The JSON result is a document, not bytes: columnar fields, NaN written as null.
+RESULT_CONTENT["application/json"] = {"schema": {
+    "type": "object", "required": ["n", "fields"], "properties": {
+        "n": {"type": "integer", "minimum": 0, "description": "Number of points."},
+        "fields": {"type": "object", "description": "One array of n values per field "
+                   "(scalars, or [x, y, z] for points, normals and directions); null where a "
+                   "value is NaN (status != 0).",
+                   "additionalProperties": {"type": "array"}},
+        "faces": {"type": "array", "description": "Triangles of the input mesh, if any.",
+                  "items": {"type": "array", "items": {"type": "integer"}}},
+        "info": {"type": "object", "description": "Method, parameters and timings."}}}}
 
 ResultFormat = Literal[RESULT_FORMATS]
 
@@ -57,11 +79,22 @@ def job_view(job: JobRecord) -> Job:
         error=JobError(**job.error) if job.error else None, result=result, links=links)
 
 
-async def _load(store: JobStore, job_id: str) -> JobRecord:
+async def _load(store: JobStore, job_id: str, owner: str) -> JobRecord:
+    """The caller's job; another owner's job is answered exactly like a missing one."""
     job = await anyio.to_thread.run_sync(store.get, job_id)
-    if job is None:
+    if job is None or job.owner != owner:
         raise HTTPProblem("job-not-found", f"no job with id {job_id!r}", job_id=job_id)
     return job
+
+
+def _queue_problem(settings: Settings, scope: str, count: int, limit: int) -> HTTPProblem:
+    retry = {"Retry-After": str(settings.retry_after_seconds)}
+    if scope == "owner":
+        return HTTPProblem("too-many-jobs", f"this API key has {count} unfinished jobs; the "
+                           f"limit is {limit} per key (CURVATURE_MAX_JOBS_PER_KEY)",
+                           headers=retry)
+    return HTTPProblem("queue-full", f"{count} jobs are queued or running; the limit is "
+                       f"{limit} (CURVATURE_MAX_QUEUED_JOBS)", headers=retry)
 
 
 @router.post(
@@ -69,11 +102,12 @@ async def _load(store: JobStore, job_id: str) -> JobRecord:
     summary="Submit a cloud for curvature estimation",
     responses={202: {"description": "Accepted and queued; Location gives the job's URL."},
                **problem_responses("malformed-request", "invalid-request", "invalid-parameters",
-                                "non-finite-coordinates", "too-large", "unknown-format",
-                                "queue-full")},
+                                   "non-finite-coordinates", "too-large", "cloud-too-large",
+                                   "unknown-format", "too-many-jobs", "queue-full",
+                                   "insufficient-storage")},
 )
 async def submit_job(
-    request: Request, response: Response, owner: Annotated[str, Depends(client_id)],
+    request: Request, response: Response, owner: Annotated[str, Depends(owner_id)],
     settings: Annotated[Settings, Depends(get_settings)],
     store: Annotated[JobStore, Depends(get_store)],
     executor: Annotated[LocalPoolExecutor, Depends(get_executor)],
@@ -82,25 +116,40 @@ async def submit_job(
     """Upload a file (multipart: ``file`` + optional ``params`` JSON) or send JSON arrays.
 
     The input and a ``queued`` job are stored before anything runs; the answer is 202 with
-    ``Location: /v1/jobs/{id}``. Problems in the file itself (malformed, too few points) show
-    up as a ``failed`` job with an ``error`` once a worker has read it.
+    ``Location: /v1/jobs/{id}``. Problems in the file itself (malformed, too few points,
+    more than the point limit) show up as a ``failed`` job with an ``error`` once a worker has
+    read it. 429 when the key has too many unfinished jobs, 503 when the whole queue is full
+    (both with ``Retry-After``), 507 when the disk is full.
     """
-    unfinished = await anyio.to_thread.run_sync(store.count_unfinished)
-    if unfinished >= settings.max_queued_jobs:
-        raise HTTPProblem("queue-full", f"{unfinished} jobs are queued or running; the limit "
-                          f"is {settings.max_queued_jobs}",
-                          headers={"Retry-After": str(settings.retry_after_seconds)})
+    # Cheap checks first, so a refused client does not upload a big file for nothing; the
+    # insert checks again, atomically, against concurrent submissions.
+    mine, everyone = await anyio.to_thread.run_sync(
+        lambda: (store.count_unfinished(owner), store.count_unfinished()))
+    if mine >= settings.max_jobs_per_key:
+        raise _queue_problem(settings, "owner", mine, settings.max_jobs_per_key)
+    if everyone >= settings.max_queued_jobs:
+        raise _queue_problem(settings, "total", everyone, settings.max_queued_jobs)
     job_id = new_job_id()
     folder = settings.jobs_dir / job_id
-    folder.mkdir(parents=True)
     try:
-        received = await receive_cloud(request, folder, settings)
-        job = await anyio.to_thread.run_sync(lambda: store.insert(
-            job_id=job_id, owner=owner, params=received.params, input_kind=received.kind,
-            input_file=received.input_file, input_name=received.filename,
-            input_format=received.format, input_bytes=received.size,
-            n_points=received.n_points))
+        with request.app.state.busy_folders.hold(job_id):
+            folder.mkdir(parents=True)
+            received = await receive_cloud(request, folder, settings)
+            if received.n_points is not None and received.n_points > settings.max_points:
+                raise HTTPProblem("cloud-too-large", (
+                    f"the cloud has {received.n_points} points; this service accepts at "
+                    f"most {settings.max_points} (CURVATURE_MAX_POINTS)"))
+            job = await anyio.to_thread.run_sync(lambda: store.insert(
+                job_id=job_id, owner=owner, params=received.params, input_kind=received.kind,
+                input_file=received.input_file, input_name=received.filename,
+                input_format=received.format, input_bytes=received.size,
+                n_points=received.n_points, max_unfinished=settings.max_queued_jobs,
+                max_owner_unfinished=settings.max_jobs_per_key))
+    except QueueLimitError as exc:
+        shutil.rmtree(folder, ignore_errors=True)
+        raise _queue_problem(settings, exc.scope, exc.count, exc.limit) from None
     except BaseException:
+        # Nothing was accepted: no row, and no files left to fill the disk.
         shutil.rmtree(folder, ignore_errors=True)
         raise
     metrics.jobs_submitted.inc(input=received.kind)
@@ -113,14 +162,15 @@ async def submit_job(
 @router.get("", response_model=JobPage, summary="List the caller's jobs, newest first",
             responses=problem_responses("invalid-request"))
 def list_jobs(
-    response: Response, owner: Annotated[str, Depends(client_id)],
+    response: Response, owner: Annotated[str, Depends(owner_id)],
     store: Annotated[JobStore, Depends(get_store)],
     limit: Annotated[int, Query(ge=1, le=200, description="Page size.")] = 20,
-    cursor: Annotated[str | None, Query(pattern=r"^[0-9]+$",
+    cursor: Annotated[str | None, Query(pattern=r"^[0-9]{1,18}$",
                                         description="next_cursor of the previous page.")] = None,
     status: Annotated[Literal[STATUSES] | None, Query(description="Only this status.")] = None,
 ) -> JobPage:
-    """Jobs submitted with the same ``X-Client-Id`` (or without one), keyset-paginated."""
+    """Jobs submitted with the caller's API key (all jobs when the service runs without keys),
+    keyset-paginated."""
     before = int(cursor) if cursor else None
     rows = store.list_jobs(owner, limit=limit + 1, before_seq=before, status=status)
     page, more = rows[:limit], len(rows) > limit
@@ -133,8 +183,10 @@ def list_jobs(
 
 @router.get("/{job_id}", response_model=Job, summary="Status, progress and error of a job",
             responses=problem_responses("job-not-found"))
-async def get_job(job_id: str, store: Annotated[JobStore, Depends(get_store)]) -> Job:
-    return job_view(await _load(store, job_id))
+async def get_job(job_id: str, owner: Annotated[str, Depends(owner_id)],
+                  store: Annotated[JobStore, Depends(get_store)]) -> Job:
+    """Another key's job is answered 404, like a job that does not exist."""
+    return job_view(await _load(store, job_id, owner))
 
 
 @router.get(
@@ -144,10 +196,11 @@ async def get_job(job_id: str, store: Annotated[JobStore, Depends(get_store)]) -
                      + ", ".join(f"{f} as {RESULT_MEDIA_TYPES[f]}" for f in RESULT_FORMATS),
                      "content": RESULT_CONTENT},
                **problem_responses("job-not-found", "result-not-ready", "job-failed",
-                                   "not-acceptable", "invalid-request")},
+                                   "not-acceptable", "invalid-request",
+                                   "insufficient-storage")},
 )
 async def get_result(
-    job_id: str, request: Request,
+    job_id: str, request: Request, owner: Annotated[str, Depends(owner_id)],
     settings: Annotated[Settings, Depends(get_settings)],
     store: Annotated[JobStore, Depends(get_store)],
     executor: Annotated[LocalPoolExecutor, Depends(get_executor)],
@@ -159,7 +212,7 @@ async def get_result(
     ``application/x-npz``), else JSON. JSON is columnar with NaN as null; PLY is binary with
     the input faces; 409 while the job is queued or running."""
     fmt = negotiate(format, request.headers.get("accept"))
-    job = await _load(store, job_id)
+    job = await _load(store, job_id, owner)
     if job.status in (QUEUED, RUNNING):
         raise HTTPProblem("result-not-ready", f"job {job_id} is {job.status} "
                           f"({job.progress:.0%} done); retry later",
@@ -184,21 +237,22 @@ async def get_result(
                **problem_responses("job-not-found")},
 )
 async def delete_job(
-    job_id: str, settings: Annotated[Settings, Depends(get_settings)],
+    job_id: str, owner: Annotated[str, Depends(owner_id)],
+    settings: Annotated[Settings, Depends(get_settings)],
     store: Annotated[JobStore, Depends(get_store)],
     executor: Annotated[LocalPoolExecutor, Depends(get_executor)],
 ) -> Job | Response:
     """A queued or running job is cancelled (200 with the job, status ``cancelled``; a running
     computation stops at its next progress report). A finished job is deleted with its files
     (204)."""
-    job = await _load(store, job_id)
+    job = await _load(store, job_id, owner)
     if not job.is_final:
         cancelled = await anyio.to_thread.run_sync(store.cancel, job_id,
                                                    settings.result_ttl_seconds)
         if cancelled is not None:
             executor.cancel(job_id)
             return job_view(cancelled)
-        job = await _load(store, job_id)  # it finished meanwhile: delete it below
+        job = await _load(store, job_id, owner)  # it finished meanwhile: delete it below
     await anyio.to_thread.run_sync(store.delete, job_id)
     await anyio.to_thread.run_sync(remove_job_files, settings, job_id)
     return Response(status_code=204)

@@ -7,7 +7,7 @@ import warnings
 from pathlib import Path
 
 import pytest
-from service_helpers import SCANS, grid_mesh, make_settings, sphere, wait_ready
+from service_helpers import KEY_A, SCANS, bearer, grid_mesh, make_settings, sphere, wait_ready
 
 import curvature
 
@@ -20,9 +20,9 @@ from service.app import create_app  # noqa: E402
 
 @pytest.fixture(scope="session")
 def app_client(tmp_path_factory):
-    """One app with its pool for all in-process tests."""
+    """One app with its pool for all in-process tests; the client sends API key A."""
     app = create_app(make_settings(tmp_path_factory.mktemp("service-data")))
-    with TestClient(app, raise_server_exceptions=False) as client:
+    with TestClient(app, raise_server_exceptions=False, headers=bearer(KEY_A)) as client:
         wait_ready(client)
         yield client
 

@@ -24,6 +24,15 @@ from service.settings import Settings
 REPO = Path(__file__).resolve().parents[2]
 SCANS = REPO.parent / "shared" / "data"
 FINAL = ("succeeded", "failed", "cancelled")
+# API keys of the test apps: the in-process client sends KEY_A unless a test says otherwise.
+KEY_A = "test-key-alpha-0123456789"
+KEY_B = "test-key-bravo-0123456789"
+KEYS = f"{KEY_A},{KEY_B}"
+
+
+def bearer(key: str) -> dict[str, str]:
+    """The Authorization header for ``key``."""
+    return {"Authorization": f"Bearer {key}"}
 
 
 def sphere(n: int = 300, radius: float = 2.0, seed: int = 0) -> np.ndarray:
@@ -49,11 +58,12 @@ def grid_mesh(nx: int = 12, ny: int = 10) -> tuple[np.ndarray, np.ndarray]:
     return pts, np.array(faces, dtype=np.int64)
 
 
-def wait_for_job(client, job_id: str, timeout: float = 120.0, until=FINAL) -> dict:
+def wait_for_job(client, job_id: str, timeout: float = 120.0, until=FINAL,
+                 headers: dict | None = None) -> dict:
     """Poll a job until its status is in ``until``; fail the test on timeout."""
     deadline = time.monotonic() + timeout
     while True:
-        response = client.get(f"/v1/jobs/{job_id}")
+        response = client.get(f"/v1/jobs/{job_id}", headers=headers or {})
         assert response.status_code == 200, response.text
         job = response.json()
         if job["status"] in until:
@@ -64,11 +74,24 @@ def wait_for_job(client, job_id: str, timeout: float = 120.0, until=FINAL) -> di
 
 
 def make_settings(data_dir: Path, **changes) -> Settings:
-    """Small, fast settings for tests (pool of 2)."""
+    """Small, fast settings for tests (pool of 2, API keys KEY_A and KEY_B)."""
     values = {"data_dir": data_dir, "workers": 2, "cleanup_interval_seconds": 3600,
-              "progress_interval_seconds": 0.05, "dispatch_poll_seconds": 0.2}
+              "progress_interval_seconds": 0.05, "dispatch_poll_seconds": 0.2,
+              "api_keys": KEYS}
     values.update(changes)
     return Settings(**values)
+
+
+@contextlib.contextmanager
+def changed_executor(client, **changes):
+    """Temporarily change the settings the running app's executor reads at each dispatch."""
+    executor = client.app.state.executor
+    original = executor.settings
+    executor.settings = original.model_copy(update=changes)
+    try:
+        yield executor
+    finally:
+        executor.settings = original
 
 
 @contextlib.contextmanager
@@ -119,11 +142,13 @@ class ServerProcess:
         CURVATURE_DATA_DIR.
     log_path : Path
         Where its output goes (shown when a test fails).
+    api_key : str, optional
+        Sent by :attr:`client` with every request.
     **env
         More CURVATURE_* variables (names without the prefix).
     """
 
-    def __init__(self, data_dir: Path, log_path: Path, **env):
+    def __init__(self, data_dir: Path, log_path: Path, api_key: str | None = None, **env):
         self.data_dir = data_dir
         self.log_path = log_path
         self.port = free_port()
@@ -132,6 +157,7 @@ class ServerProcess:
                     "CURVATURE_WORKERS": "2", "CURVATURE_DISPATCH_POLL_SECONDS": "0.2",
                     "CURVATURE_PROGRESS_INTERVAL_SECONDS": "0.05"}
         self.env.update({f"CURVATURE_{k.upper()}": str(v) for k, v in env.items()})
+        self.headers = bearer(api_key) if api_key else {}
         self.process: subprocess.Popen | None = None
         self.client: httpx.Client | None = None
 
@@ -144,7 +170,7 @@ class ServerProcess:
             self.process = subprocess.Popen([sys.executable, "-m", "service"], cwd=REPO,
                                             env=self.env, stdout=log, stderr=subprocess.STDOUT,
                                             start_new_session=True)
-        self.client = httpx.Client(base_url=self.url, timeout=60.0)
+        self.client = httpx.Client(base_url=self.url, timeout=60.0, headers=self.headers)
         deadline = time.monotonic() + timeout
         while True:
             if self.process.poll() is not None:

@@ -15,9 +15,12 @@ import curvature
 def test_methods_lists_every_core_method_with_bounds(client):
     doc = client.get("/v1/methods").json()
     names = [m["name"] for m in doc["methods"]]
-    assert names == sorted(curvature.FINDERS)
+    assert names == ["auto", *sorted(curvature.FINDERS)]
+    assert doc["default_method"] == curvature.DEFAULT_METHOD == "auto"
     for method in doc["methods"]:
-        specs = {s.name: s for s in curvature.FINDERS[method["name"]].PARAMS}
+        params = (curvature.AUTO_PARAMS if method["name"] == "auto"
+                  else curvature.FINDERS[method["name"]].PARAMS)
+        specs = {s.name: s for s in params}
         assert [p["name"] for p in method["parameters"]] == list(specs)
         for param in method["parameters"]:
             spec = specs[param["name"]]

@@ -11,7 +11,16 @@ from concurrent.futures import ThreadPoolExecutor
 import httpx
 import numpy as np
 import pytest
-from service_helpers import ServerProcess, processes_with_env, sphere, wait_for_job
+from service_helpers import (
+    KEY_A,
+    KEY_B,
+    KEYS,
+    ServerProcess,
+    bearer,
+    processes_with_env,
+    sphere,
+    wait_for_job,
+)
 
 import curvature
 
@@ -19,7 +28,8 @@ import curvature
 @pytest.fixture(scope="module")
 def server(tmp_path_factory):
     root = tmp_path_factory.mktemp("server")
-    proc = ServerProcess(root / "data", root / "server.log").start()
+    proc = ServerProcess(root / "data", root / "server.log", api_key=KEY_A,
+                         api_keys=KEYS).start()
     yield proc
     proc.stop()
 
@@ -61,7 +71,7 @@ def test_walkthrough_on_a_real_scan(server, scans, tmp_path):
 
 
 def test_fifty_concurrent_submissions_all_complete(server):
-    owner = {"X-Client-Id": "crowd"}
+    owner = bearer(KEY_B)  # the walk-through's job is key A's: not in this listing
     clouds = [sphere(60, radius=1.0 + i / 50, seed=i) for i in range(50)]
 
     def submit(points):
@@ -78,12 +88,12 @@ def test_fifty_concurrent_submissions_all_complete(server):
     listed = server.client.get("/v1/jobs", params={"limit": 200}, headers=owner).json()
     assert {item["id"] for item in listed["items"]} == set(ids)
     for job_id, points in zip(ids, clouds, strict=True):
-        job = wait_for_job(server.client, job_id, timeout=300)
+        job = wait_for_job(server.client, job_id, timeout=300, headers=owner)
         assert job["status"] == "succeeded", job
         assert job["n_points"] == len(points)
     # Each result belongs to its own submission (radius 1 + i/50 gives k1 = 1/radius).
     for i in (0, 25, 49):
-        doc = server.client.get(f"/v1/jobs/{ids[i]}/result").json()
+        doc = server.client.get(f"/v1/jobs/{ids[i]}/result", headers=owner).json()
         assert np.median(np.array(doc["fields"]["k1"], float)) == pytest.approx(
             1.0 / (1.0 + i / 50), rel=0.05)
 

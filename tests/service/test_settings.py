@@ -54,3 +54,30 @@ def test_dask_executor_is_refused_clearly(tmp_path):
     settings = Settings(data_dir=tmp_path, executor="dask")
     with pytest.raises(RuntimeError, match="dask"):
         create_executor(settings, JobStore(settings.db_path), ServiceMetrics())
+
+
+def test_security_and_limit_settings_from_the_environment(monkeypatch, tmp_path):
+    keys = tmp_path / "keys.txt"
+    monkeypatch.setenv("CURVATURE_API_KEYS", "key-one-0123456789,key-two-0123456789")
+    monkeypatch.setenv("CURVATURE_API_KEYS_FILE", str(keys))
+    monkeypatch.setenv("CURVATURE_ALLOW_OPEN", "true")
+    monkeypatch.setenv("CURVATURE_MAX_POINTS", "1000")
+    monkeypatch.setenv("CURVATURE_MAX_JOBS_PER_KEY", "7")
+    monkeypatch.setenv("CURVATURE_JOB_TIME_LIMIT_SECONDS", "90")
+    monkeypatch.setenv("CURVATURE_TIME_LIMIT_GRACE_SECONDS", "2")
+    monkeypatch.setenv("CURVATURE_STORE_BUSY_TIMEOUT_SECONDS", "5")
+    settings = Settings()
+    assert settings.api_keys.get_secret_value() == "key-one-0123456789,key-two-0123456789"
+    assert "key-one" not in repr(settings)  # a secret: never printed in logs or reprs
+    assert settings.api_keys_file == keys and settings.allow_open
+    assert (settings.max_points, settings.max_jobs_per_key) == (1000, 7)
+    assert settings.job_time_limit_seconds == 90 and settings.time_limit_grace_seconds == 2
+    assert settings.store_busy_timeout_seconds == 5
+
+
+def test_defaults_are_closed(monkeypatch):
+    for name in ("API_KEYS", "API_KEYS_FILE", "ALLOW_OPEN"):
+        monkeypatch.delenv(f"CURVATURE_{name}", raising=False)
+    settings = Settings()
+    assert settings.api_keys is None and settings.api_keys_file is None
+    assert not settings.allow_open

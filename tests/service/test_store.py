@@ -78,10 +78,23 @@ def test_job_failing_too_often_is_not_requeued_forever(store):
 def test_requeue_after_worker_crash(store):
     job_id = add(store)
     store.claim(job_id, "r1")
-    assert store.requeue_after_crash(job_id, max_attempts=2, error=ERROR) == "queued"
+    assert store.requeue_after_crash(job_id, "r1", max_attempts=2, error=ERROR) == "queued"
     store.claim(job_id, "r2")
-    assert store.requeue_after_crash(job_id, max_attempts=2, error=ERROR) == "failed"
-    assert store.requeue_after_crash(job_id, max_attempts=2, error=ERROR) is None
+    # A stale report of the first run changes nothing.
+    assert store.requeue_after_crash(job_id, "r1", max_attempts=2, error=ERROR) is None
+    assert store.requeue_after_crash(job_id, "r2", max_attempts=2, error=ERROR,
+                                     ttl=60) == "failed"
+    assert store.get(job_id).expires_at is not None  # failed jobs expire like others
+    assert store.requeue_after_crash(job_id, "r2", max_attempts=2, error=ERROR) is None
+
+
+def test_run_stopped_on_purpose_is_not_counted(store):
+    job_id = add(store)
+    for run in ("r1", "r2", "r3"):  # e.g. the pool killed three times for other jobs
+        store.claim(job_id, run)
+        assert store.requeue_after_crash(job_id, run, max_attempts=2, error=ERROR,
+                                         count_attempt=False) == "queued"
+    assert store.get(job_id).attempts == 0
 
 
 def test_cancel_only_unfinished(store):

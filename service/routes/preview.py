@@ -1,0 +1,111 @@
+"""Preview pictures of a finished job: its cloud colored by a curvature field (PNG)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Literal
+
+import anyio
+import anyio.to_thread
+import numpy as np
+from fastapi import APIRouter, Depends, Query, Request
+from fastapi.responses import FileResponse
+
+import curvature
+
+from ..dependencies import get_settings, get_store, owner_id
+from ..problems import HTTPProblem, problem_responses
+from ..result_files import CANONICAL_RESULT
+from ..settings import Settings
+from ..store import CANCELLED, FAILED, QUEUED, RUNNING, JobStore
+from ..store import Job as JobRecord
+
+router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
+
+PreviewField = Literal[tuple(curvature.PREVIEW_FIELDS)]
+PreviewView = Literal[tuple(curvature.PREVIEW_VIEWS)]
+# Renders at once per process: each holds a result's points in memory and a CPU core.
+MAX_CONCURRENT_RENDERS = 2
+
+
+def preview_path(job_dir: Path, field: str, view: str) -> Path:
+    """Where the PNG of ``field`` seen from ``view`` is cached in the job's folder."""
+    return job_dir / f"preview-{field}-{view}.png"
+
+
+def render_cached(job_dir: Path, field: str, view: str) -> Path:
+    """The cached PNG, rendered from the canonical result on first request.
+
+    Only the two arrays the picture needs are read from the (uncompressed) result archive,
+    not the whole result: a 1M-point result is then about 32 MB in memory, not 150.
+
+    Raises
+    ------
+    FileNotFoundError
+        The job's files are gone (deleted or expired).
+    """
+    target = preview_path(job_dir, field, view)
+    if not target.exists():
+        with np.load(job_dir / CANONICAL_RESULT, allow_pickle=False) as archive:
+            arrays = {"points": archive["points"], field: archive[field]}
+        curvature.render_preview(arrays, field, view=view, path=target)  # atomic rename
+    return target
+
+
+def _limiter(request: Request) -> anyio.CapacityLimiter:
+    limiter = getattr(request.app.state, "preview_limiter", None)
+    if limiter is None:
+        limiter = request.app.state.preview_limiter = anyio.CapacityLimiter(
+            MAX_CONCURRENT_RENDERS)
+    return limiter
+
+
+async def _owned_job(store: JobStore, job_id: str, owner: str) -> JobRecord:
+    job = await anyio.to_thread.run_sync(store.get, job_id)
+    if job is None or job.owner != owner:  # another owner's job does not exist for the caller
+        raise HTTPProblem("job-not-found", f"no job with id {job_id!r}", job_id=job_id)
+    return job
+
+
+@router.get(
+    "/{job_id}/preview.png", summary="Picture of a finished job colored by curvature",
+    response_class=FileResponse,
+    responses={200: {"description": "PNG (800 x 600): the cloud seen from a fixed camera, "
+                                    "colored by the field, with a color bar.",
+                     "content": {"image/png": {"schema": {"type": "string",
+                                                          "format": "binary"}}}},
+               **problem_responses("job-not-found", "result-not-ready", "job-failed",
+                                   "job-cancelled", "invalid-request", "unauthorized")},
+)
+async def get_preview(
+    job_id: str, request: Request, owner: Annotated[str, Depends(owner_id)],
+    settings: Annotated[Settings, Depends(get_settings)],
+    store: Annotated[JobStore, Depends(get_store)],
+    field: Annotated[PreviewField, Query(description="Field that gives the colors.")] = "mean",
+    view: Annotated[PreviewView, Query(
+        description="Camera preset, z up: iso (from +x, -y, +z), front (from -y), side "
+                    "(from +x) or top (from +z).")] = "iso",
+) -> FileResponse:
+    """The cloud of a succeeded job, orthographic from a camera preset, colored by ``field``
+    between its 2nd and 98th percentile (symmetric around 0 with a diverging map for mean and
+    Gaussian curvature); points without a value are grey. Large clouds are drawn from a
+    fixed subsample of 400,000 points. Rendered on first request and kept with the job."""
+    job = await _owned_job(store, job_id, owner)
+    if job.status in (QUEUED, RUNNING):
+        raise HTTPProblem("result-not-ready", f"job {job_id} is {job.status} "
+                          f"({job.progress:.0%} done); retry later",
+                          headers={"Retry-After": "1"}, job_id=job_id, job_status=job.status)
+    if job.status == FAILED:
+        detail = (job.error or {}).get("detail", "the job failed")
+        raise HTTPProblem("job-failed", f"job {job_id} failed: {detail}", job_id=job_id)
+    if job.status == CANCELLED:
+        raise HTTPProblem("job-cancelled", f"job {job_id} was cancelled", job_id=job_id)
+    try:
+        path = await anyio.to_thread.run_sync(render_cached, settings.jobs_dir / job_id, field,
+                                              view, limiter=_limiter(request))
+    except FileNotFoundError:  # deleted or expired while we looked
+        raise HTTPProblem("job-not-found", f"no job with id {job_id!r}", job_id=job_id) \
+            from None
+    return FileResponse(path, media_type="image/png", headers={
+        "Content-Disposition": f'inline; filename="{job_id}-{field}-{view}.png"',
+        "Cache-Control": "private, max-age=86400"})
