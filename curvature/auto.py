@@ -79,7 +79,25 @@ class AutoPlan:
 
 
 @njit(cache=True)
-def _cell_representatives(points, cells, cell_of, center):
+def _cell_ijk(p, origin, cell, t):
+    """Grid index of coordinate ``p`` along axis ``t`` (clamped at 0)."""
+    return max(np.int64(np.floor((p - origin[t]) / cell)), 0)
+
+
+@njit(cache=True)
+def _grid_keys(points, origin, cell):
+    """One integer key per point naming its grid cell (21 bits an axis), shape (n,)."""
+    n = points.shape[0]
+    key = np.empty(n, np.int64)
+    for i in range(n):
+        key[i] = ((_cell_ijk(points[i, 0], origin, cell, 0) << 42)
+                  | (_cell_ijk(points[i, 1], origin, cell, 1) << 21)
+                  | _cell_ijk(points[i, 2], origin, cell, 2))
+    return key
+
+
+@njit(cache=True)
+def _cell_representatives(points, cells, cell_of, origin, cell):
     """Per cell, the point nearest the cell's centre (ties: smaller x, then y, then z).
 
     Parameters
@@ -89,8 +107,9 @@ def _cell_representatives(points, cells, cell_of, center):
         Number of distinct cells.
     cell_of : ndarray, shape (n,), int64
         Cell of every point, in ``range(cells)``.
-    center : ndarray, shape (n, 3)
-        Centre of every point's cell.
+    origin : ndarray, shape (3,)
+    cell : float
+        Grid corner and cell size (each point's cell centre is recomputed from them).
 
     Returns
     -------
@@ -103,7 +122,8 @@ def _cell_representatives(points, cells, cell_of, center):
         c = cell_of[i]
         d = 0.0
         for t in range(3):
-            d += (points[i, t] - center[i, t]) ** 2
+            center = origin[t] + (_cell_ijk(points[i, t], origin, cell, t) + 0.5) * cell
+            d += (points[i, t] - center) ** 2
         b = best[c]
         if b < 0 or d < best_d[c] or (d == best_d[c] and (
                 points[i, 0], points[i, 1], points[i, 2]) < (points[b, 0], points[b, 1],
@@ -132,18 +152,17 @@ def grid_cells(points: np.ndarray, origin: np.ndarray,
     owner : ndarray, shape (n,), int64
         Index into ``reps`` of every point's cell representative.
     """
-    ijk = np.floor((points - origin) / cell).astype(np.int64)
-    ijk = np.maximum(ijk, 0)
-    # One integer key per cell; 21 bits an axis covers any grid the plan makes.
-    key = (ijk[:, 0] << 42) | (ijk[:, 1] << 21) | ijk[:, 2]
-    ukeys, cell_of = np.unique(key, return_inverse=True)
-    center = origin + (ijk + 0.5) * cell
-    best = _cell_representatives(points, ukeys.shape[0], cell_of.ravel(), center)
+    origin = np.asarray(origin, np.float64)
+    # Keys in one pass (no (n, 3) temporaries: this runs on whole 10M-point clouds).
+    ukeys, cell_of = np.unique(_grid_keys(points, origin, float(cell)), return_inverse=True)
+    cell_of = cell_of.ravel()
+    best = _cell_representatives(points, ukeys.shape[0], cell_of, origin, float(cell))
+    del ukeys
     order = np.argsort(best)
     reps = best[order]
     rank = np.empty_like(order)
     rank[order] = np.arange(order.shape[0])
-    return reps, rank[cell_of.ravel()]
+    return reps, rank[cell_of]
 
 
 def coarse_cell(points: np.ndarray, cells: int) -> float:
@@ -355,7 +374,10 @@ class AutoRun:
         frame = np.empty((a, 3, 3))
         status = np.empty(a, np.int8)
         reach = np.empty(a) if self.track_reach else None
-        for sl in self._chunks(a):
+        # Neighbor lists are k long: chunk by neighbor entries, not anchors, so a chunk holds
+        # as many entries as a chunk of 24-neighbor queries would.
+        step = max(64, self.chunk_size * 24 // max(k, 24))
+        for sl in (slice(i, min(i + step, a)) for i in range(0, a, step)):
             indptr, indices, d2 = knn_csr(self.points, self.tree, anchors[sl], k)
             nfr_anchor_fits(self.points, field, anchors[sl], indptr, indices, coef[sl],
                             scale[sl], frame[sl], resid[sl], status[sl])

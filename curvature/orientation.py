@@ -8,8 +8,6 @@ from __future__ import annotations
 
 import numpy as np
 from numba import njit
-from scipy.sparse import csr_matrix
-from scipy.sparse.csgraph import connected_components, minimum_spanning_tree
 
 # Neighbors per point in the graph the orientation propagates over (the nearest ones).
 ORIENT_K = 8
@@ -66,12 +64,14 @@ def first_neighbors(nbhd, k: int = None) -> np.ndarray:
 
 
 def signs_auto(points: np.ndarray, est: np.ndarray, graph: np.ndarray) -> np.ndarray:
-    """Propagate a consistent orientation over a minimum spanning tree.
+    """Propagate a consistent orientation over a minimum spanning forest.
 
-    The graph joins each point to its first neighbors with weight 1 - |ni . nj|, so the tree
-    prefers edges between nearly parallel normals, where a flip is unambiguous (Hoppe et al.,
-    SIGGRAPH 1992). Each connected component is seeded at the point farthest from its
+    The graph joins each point to its first neighbors (both ways) with weight 1 - |ni . nj|,
+    so the forest prefers edges between nearly parallel normals, where a flip is unambiguous
+    (Hoppe et al., SIGGRAPH 1992). Each tree is seeded at its point farthest from its
     centroid, with the normal pointing away from the centroid (outward on closed surfaces).
+    The forest is grown by Prim's algorithm straight on the neighbor table, so memory stays
+    near 60 bytes per point beyond ``graph`` (no weighted edge list, no edge sort).
 
     Parameters
     ----------
@@ -85,121 +85,216 @@ def signs_auto(points: np.ndarray, est: np.ndarray, graph: np.ndarray) -> np.nda
     -------
     ndarray, shape (n,), int8
     """
-    n = points.shape[0]
     valid = np.isfinite(est).all(axis=1)
-    indptr, indices, weights = weighted_graph(graph, est, valid)
-    # The graph need not be symmetric: the spanning tree treats i->j and j->i as one undirected
-    # edge, and their weights are equal, so the result does not depend on the point order.
-    graph_csr = csr_matrix((weights, indices, indptr), shape=(n, n))
-    tree_graph = minimum_spanning_tree(graph_csr)
-    sym = (tree_graph + tree_graph.T).tocsr()
-    n_comp, labels = connected_components(sym, directed=False)
-    seeds = component_seeds(points, labels, n_comp, valid)
-    centroids = component_centroids(points, labels, n_comp, valid)
-    return propagate_signs(sym.indptr.astype(np.int64), sym.indices.astype(np.int64), est,
-                           seeds, centroids[labels[seeds]], points)
+    rev_ptr, rev_idx = reverse_edges(graph, valid)
+    parent, order, count = spanning_forest(graph, rev_ptr, rev_idx, est, valid)
+    del rev_ptr, rev_idx
+    return forest_signs(points, est, parent, order[:count])
 
 
 @njit(cache=True)
-def weighted_graph(graph, est, valid):
-    """CSR arrays of the orientation graph with weights 1 - |ni . nj| (kept above zero).
-
-    Parameters
-    ----------
-    graph : ndarray, shape (n, k), int
-        Neighbor indices, -1 for none.
-    est : ndarray, shape (n, 3)
-        Unit normals.
-    valid : ndarray, shape (n,), bool
-        Points with a normal; edges touching others are left out.
+def reverse_edges(graph, valid):
+    """CSR lists of the points naming each point as a neighbor (the graph's other direction).
 
     Returns
     -------
     indptr : ndarray, shape (n + 1,), int64
     indices : ndarray, shape (nnz,), int32
-    weights : ndarray, shape (nnz,), float64
     """
     n, k = graph.shape
     indptr = np.zeros(n + 1, np.int64)
-    indices = np.empty(n * k, np.int32)
-    weights = np.empty(n * k)
-    nnz = 0
     for i in range(n):
         if valid[i]:
             for t in range(k):
                 j = graph[i, t]
-                if j < 0 or j == i or not valid[j]:
-                    continue
-                dot = est[i, 0] * est[j, 0] + est[i, 1] * est[j, 1] + est[i, 2] * est[j, 2]
-                # Zero weights would read as missing edges; keep them strictly positive.
-                weights[nnz] = max(1.0 - abs(dot), 0.0) + 1e-12
-                indices[nnz] = j
-                nnz += 1
-        indptr[i + 1] = nnz
-    return indptr, indices[:nnz], weights[:nnz]
-
-
-def component_centroids(points, labels, n_comp, valid) -> np.ndarray:
-    """Centroid of the valid points of each component, shape (n_comp, 3)."""
-    w = valid.astype(np.float64)
-    counts = np.maximum(np.bincount(labels, weights=w, minlength=n_comp), 1.0)
-    return np.stack([np.bincount(labels, weights=points[:, d] * w, minlength=n_comp) / counts
-                     for d in range(3)], axis=1)
-
-
-def component_seeds(points, labels, n_comp, valid) -> np.ndarray:
-    """Index of each component's valid point farthest from its centroid, shape (c,)."""
-    cent = component_centroids(points, labels, n_comp, valid)
-    dist = np.linalg.norm(points - cent[labels], axis=1)
-    dist[~valid] = -1.0
-    # Sort by (label, -distance, index): the first entry of each label is its seed.
-    order = np.lexsort((np.arange(len(labels)), -dist, labels))
-    first = np.ones(len(order), bool)
-    first[1:] = labels[order][1:] != labels[order][:-1]
-    seeds = order[first]
-    return seeds[valid[seeds]]
+                if j >= 0 and j != i and valid[j]:
+                    indptr[j + 1] += 1
+    for i in range(n):
+        indptr[i + 1] += indptr[i]
+    indices = np.empty(indptr[n], np.int32)
+    fill = indptr[:-1].copy()
+    for i in range(n):
+        if valid[i]:
+            for t in range(k):
+                j = graph[i, t]
+                if j >= 0 and j != i and valid[j]:
+                    indices[fill[j]] = i
+                    fill[j] += 1
+    return indptr, indices
 
 
 @njit(cache=True)
-def propagate_signs(indptr, indices, normals, seeds, seed_centroids, points):
-    """Breadth-first sign propagation over a spanning forest (CSR, symmetric).
+def _weight(est, i, j):
+    dot = est[i, 0] * est[j, 0] + est[i, 1] * est[j, 1] + est[i, 2] * est[j, 2]
+    return max(1.0 - abs(dot), 0.0)
+
+
+@njit(cache=True)
+def _less(key, a, b):
+    """Heap order: smaller key first, then smaller index (deterministic on ties)."""
+    return key[a] < key[b] or (key[a] == key[b] and a < b)
+
+
+@njit(cache=True)
+def _sift_up(heap, pos, key, h):
+    v = heap[h]
+    while h > 0:
+        up = (h - 1) // 2
+        if not _less(key, v, heap[up]):
+            break
+        heap[h] = heap[up]
+        pos[heap[h]] = h
+        h = up
+    heap[h] = v
+    pos[v] = h
+
+
+@njit(cache=True)
+def _sift_down(heap, pos, key, h, size):
+    v = heap[h]
+    while True:
+        c = 2 * h + 1
+        if c >= size:
+            break
+        if c + 1 < size and _less(key, heap[c + 1], heap[c]):
+            c += 1
+        if not _less(key, heap[c], v):
+            break
+        heap[h] = heap[c]
+        pos[heap[h]] = h
+        h = c
+    heap[h] = v
+    pos[v] = h
+
+
+@njit(cache=True)
+def _relax(j, i, w, key, parent, done, heap, pos, size):
+    """Offer edge i-j of weight w to j; returns the new heap size."""
+    if done[j] or not w < key[j]:
+        return size
+    key[j] = w
+    parent[j] = i
+    if pos[j] < 0:
+        heap[size] = j
+        pos[j] = size
+        size += 1
+    _sift_up(heap, pos, key, pos[j])
+    return size
+
+
+@njit(cache=True)
+def spanning_forest(graph, rev_ptr, rev_idx, est, valid):
+    """Minimum spanning forest of the symmetric neighbor graph by Prim's algorithm.
+
+    Trees start at the lowest-index point not yet reached, so the forest depends only on the
+    (Z-ordered) input.
+
+    Returns
+    -------
+    parent : ndarray, shape (n,), int32
+        Tree parent of each point, -1 for roots and invalid points.
+    order : ndarray, shape (n,), int32
+        Points in the order they joined the forest (parents before children); the first
+        ``count`` entries are used.
+    count : int
+    """
+    n, k = graph.shape
+    key = np.full(n, np.inf)
+    parent = np.full(n, -1, np.int32)
+    done = np.zeros(n, np.bool_)
+    heap = np.empty(n, np.int32)
+    pos = np.full(n, -1, np.int32)
+    order = np.empty(n, np.int32)
+    count = 0
+    for start in range(n):
+        if done[start] or not valid[start]:
+            continue
+        key[start] = 0.0
+        heap[0] = start
+        pos[start] = 0
+        size = 1
+        while size > 0:
+            i = heap[0]
+            size -= 1
+            pos[i] = -1
+            if size > 0:
+                heap[0] = heap[size]
+                pos[heap[0]] = 0
+                _sift_down(heap, pos, key, 0, size)
+            done[i] = True
+            order[count] = i
+            count += 1
+            for t in range(k):
+                j = graph[i, t]
+                if j >= 0 and j != i and valid[j]:
+                    size = _relax(j, i, _weight(est, i, j), key, parent, done, heap, pos, size)
+            for e in range(rev_ptr[i], rev_ptr[i + 1]):
+                j = rev_idx[e]
+                size = _relax(j, i, _weight(est, i, j), key, parent, done, heap, pos, size)
+    return parent, order, count
+
+
+@njit(cache=True)
+def forest_signs(points, est, parent, order):
+    """Signs of every point from the forest: consistent along edges, outward at each seed.
+
+    Each tree's seed is its point farthest from the tree's centroid (lowest index on ties);
+    its normal is turned away from the centroid, and signs follow the tree from there
+    (two points keep relative signs that agree with the product of edge flips between them).
 
     Returns
     -------
     ndarray, shape (n,), int8
-        +1 or -1 per point; unreached points keep +1.
+        +1 or -1 per point; invalid points keep +1.
     """
-    n = normals.shape[0]
-    sign = np.ones(n, np.int8)
-    seen = np.zeros(n, np.bool_)
-    queue = np.empty(n, np.int64)
-    for s in range(seeds.shape[0]):
-        root = seeds[s]
-        if seen[root]:
+    n = points.shape[0]
+    m = order.shape[0]
+    rel = np.ones(n, np.int8)  # sign relative to the tree's root
+    tree = np.full(n, -1, np.int32)
+    n_trees = 0
+    for t in range(m):
+        i = order[t]
+        p = parent[i]
+        if p < 0:
+            tree[i] = n_trees
+            n_trees += 1
             continue
+        tree[i] = tree[p]
+        dot = est[i, 0] * est[p, 0] + est[i, 1] * est[p, 1] + est[i, 2] * est[p, 2]
+        rel[i] = rel[p] if dot >= 0.0 else -rel[p]
+    cent = np.zeros((n_trees, 3))
+    size = np.zeros(n_trees)
+    for t in range(m):
+        i = order[t]
+        size[tree[i]] += 1.0
+        for d in range(3):
+            cent[tree[i], d] += points[i, d]
+    for c in range(n_trees):
+        for d in range(3):
+            cent[c, d] /= size[c]
+    far = np.full(n_trees, -1.0)
+    seed = np.full(n_trees, -1, np.int64)
+    for t in range(m):
+        i = order[t]
+        c = tree[i]
+        dist = 0.0
+        for d in range(3):
+            dist += (points[i, d] - cent[c, d]) ** 2
+        if dist > far[c] or (dist == far[c] and i < seed[c]):
+            far[c] = dist
+            seed[c] = i
+    flip = np.ones(n_trees, np.int8)
+    for c in range(n_trees):
+        s = seed[c]
         out = 0.0
         for d in range(3):
-            out += normals[root, d] * (points[root, d] - seed_centroids[s, d])
-        sign[root] = 1 if out >= 0.0 else -1
-        seen[root] = True
-        head = 0
-        tail = 0
-        queue[tail] = root
-        tail += 1
-        while head < tail:
-            i = queue[head]
-            head += 1
-            for e in range(indptr[i], indptr[i + 1]):
-                j = indices[e]
-                if seen[j]:
-                    continue
-                dot = 0.0
-                for d in range(3):
-                    dot += normals[i, d] * normals[j, d]
-                sign[j] = sign[i] if dot >= 0.0 else -sign[i]
-                seen[j] = True
-                queue[tail] = j
-                tail += 1
+            out += est[s, d] * (points[s, d] - cent[c, d])
+        want = 1 if out >= 0.0 else -1
+        flip[c] = want * rel[s]
+    sign = np.ones(n, np.int8)
+    for t in range(m):
+        i = order[t]
+        sign[i] = rel[i] * flip[tree[i]]
     return sign
 
 

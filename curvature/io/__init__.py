@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import io
 import os
+import shutil
 import struct
+import tempfile
 import zipfile
 import zlib
 from collections.abc import Callable
@@ -170,10 +172,26 @@ def _write_table(fileobj: BinaryIO, table, fmt: str, binary: bool) -> None:
         write_csv(fileobj, table)
     elif fmt == "json":
         write_json(fileobj, table)
+    elif _seekable(fileobj):
+        write_npz(fileobj, table)
     else:
-        buffer = io.BytesIO()  # zip needs a seekable target; web streams are not
-        write_npz(buffer, table)
-        fileobj.write(buffer.getvalue())
+        # zip needs a seekable target and web streams are not: build it in a spooled file
+        # (on disk beyond a few MiB, so a big result is never held twice in memory)
+        with tempfile.SpooledTemporaryFile(max_size=NPZ_SPOOL_BYTES) as spool:
+            write_npz(spool, table)
+            spool.seek(0)
+            shutil.copyfileobj(spool, fileobj, 1 << 20)
+
+
+# NPZ results for non-seekable targets are built in memory up to this size, then on disk.
+NPZ_SPOOL_BYTES = 16 << 20
+
+
+def _seekable(fileobj) -> bool:
+    try:
+        return bool(fileobj.seekable()) and fileobj.tell() >= 0
+    except (AttributeError, OSError, ValueError):
+        return False
 
 
 def write_bytes(obj, format: str, *, binary: bool = True) -> bytes:

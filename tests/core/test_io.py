@@ -223,6 +223,36 @@ def test_result_npz_round_trip(tmp_path):
     assert_same_result(res, read_result(path))
 
 
+class WriteOnly:
+    """A stream that can only be written to (like a web response)."""
+
+    def __init__(self):
+        self.chunks = []
+
+    def write(self, data):
+        self.chunks.append(bytes(data))
+        return len(data)
+
+
+@pytest.mark.parametrize("spool_bytes", [1 << 30, 64])  # in memory, spilled to disk
+def test_npz_to_a_stream_that_cannot_seek(tmp_path, monkeypatch, spool_bytes):
+    import io
+
+    from curvature import io as cio
+
+    monkeypatch.setattr(cio, "NPZ_SPOOL_BYTES", spool_bytes)
+    res = make_result()
+    stream = WriteOnly()
+    cio.write_stream(stream, res, "npz")
+    assert len(stream.chunks) >= 1
+    path = tmp_path / "res.npz"
+    write(path, res)  # a real file: written in place, no buffer
+    with np.load(io.BytesIO(b"".join(stream.chunks))) as a, np.load(path) as b:
+        assert a.files == b.files
+        for name in a.files:
+            np.testing.assert_array_equal(a[name], b[name])
+
+
 def test_result_json(tmp_path):
     res = make_result()
     path = tmp_path / "res.json"

@@ -1,0 +1,88 @@
+"""Normal orientation over a minimum spanning forest (Prim's algorithm on the neighbor table)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import minimum_spanning_tree
+from scipy.spatial import cKDTree
+
+from curvature import synthetic
+from curvature.orientation import (
+    ORIENT_K,
+    forest_signs,
+    reverse_edges,
+    signs_auto,
+    spanning_forest,
+)
+
+
+def knn_graph(points, k=ORIENT_K):
+    _, idx = cKDTree(points).query(points, k + 1)
+    return idx[:, 1:].astype(np.int32)
+
+
+def forest(points, normals, graph):
+    valid = np.isfinite(normals).all(axis=1)
+    parent, order, count = spanning_forest(graph, *reverse_edges(graph, valid), normals, valid)
+    return parent, order[:count], valid
+
+
+def scipy_mst_weight(normals, graph, valid):
+    rows = np.repeat(np.arange(len(graph)), graph.shape[1])
+    cols = graph.ravel()
+    keep = valid[rows] & valid[cols]
+    rows, cols = rows[keep], cols[keep]
+    w = 1.0 - np.abs(np.einsum("ij,ij->i", normals[rows], normals[cols])) + 1.0  # > 0: edges
+    tree = minimum_spanning_tree(csr_matrix((w, (rows, cols)), shape=(len(graph),) * 2))
+    return tree.sum() - tree.nnz, tree.nnz
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_forest_is_a_minimum_spanning_forest(seed):
+    cloud = synthetic.torus(1500, noise=0.5, seed=seed)
+    rng = np.random.default_rng(seed)
+    normals = cloud.normals * rng.choice([-1.0, 1.0], len(cloud))[:, None]
+    normals[rng.choice(len(cloud), 40, replace=False)] = np.nan  # failed points stay out
+    graph = knn_graph(cloud.points)
+    parent, order, valid = forest(cloud.points, normals, graph)
+    assert set(order.tolist()) == set(np.flatnonzero(valid).tolist())
+    position = np.empty(len(cloud), np.int64)
+    position[order] = np.arange(len(order))
+    child = order[parent[order] >= 0]
+    assert np.all(position[parent[child]] < position[child])  # parents join first
+    weight = (1.0 - np.abs(np.einsum("ij,ij->i", normals[child], normals[parent[child]]))).sum()
+    expected, edges = scipy_mst_weight(normals, graph, valid)
+    assert len(child) == edges
+    assert weight == pytest.approx(expected, rel=1e-9, abs=1e-9)
+
+
+def test_signs_make_a_closed_surface_point_outward_whatever_the_input_signs():
+    cloud = synthetic.ellipsoid(3000, axes=(3, 2, 1), noise=0.2, seed=4)
+    rng = np.random.default_rng(4)
+    flips = rng.choice([-1.0, 1.0], len(cloud))
+    signs = signs_auto(cloud.points, cloud.normals * flips[:, None], knn_graph(cloud.points))
+    np.testing.assert_array_equal(signs, flips.astype(np.int8))
+
+
+def test_each_component_is_seeded_outward_on_its_own():
+    a = synthetic.sphere(800, radius=1.0, seed=1)
+    b = synthetic.sphere(800, radius=1.0, seed=2)
+    points = np.vstack([a.points, b.points + [10.0, 0.0, 0.0]])
+    normals = -np.vstack([a.normals, b.normals])  # all inward
+    graph = knn_graph(points)
+    parent, order, valid = forest(points, normals, graph)
+    assert np.sum(parent[order] < 0) == 2  # two trees
+    signs = forest_signs(points, normals, parent, order)
+    assert np.all(signs == -1)
+
+
+def test_invalid_points_keep_their_sign_and_break_no_tree():
+    cloud = synthetic.sphere(500, seed=3)
+    normals = cloud.normals.copy()
+    normals[::7] = np.nan
+    signs = signs_auto(cloud.points, -normals, knn_graph(cloud.points))
+    assert np.all(signs[::7] == 1)
+    ok = np.isfinite(normals).all(axis=1)
+    assert np.all(signs[ok] == -1)
