@@ -101,6 +101,9 @@ def build_parser() -> argparse.ArgumentParser:
     est.add_argument("--viewpoint", type=float, nargs=3, metavar=("X", "Y", "Z"),
                      help="scanner position; implies --orientation viewpoint")
     est.add_argument("--workers", type=int, default=None, help="threads (default: all cores)")
+    est.add_argument("--tile-points", type=int, default=None,
+                     help="compute in spatial tiles of this many points, identical results in "
+                          "less memory (default: 1000000 above 2M points; 0: never)")
     est.add_argument("--ascii", action="store_true", help="write ascii PLY instead of binary")
     est.add_argument("-q", "--quiet", action="store_true", help="no progress bar or summary")
     est.add_argument("--preview", metavar="PNG", default=None,
@@ -173,6 +176,10 @@ def _add_unavailable(sub, name: str, reason: str) -> None:
     parser.set_defaults(handler=handler)
 
 
+# What method "auto" did, by whether it measured the cloud as clean.
+BRANCHES = {True: "clean: implicit quadric", False: "noisy: normal-field regression"}
+
+
 def percentiles(values: np.ndarray) -> str:
     finite = values[np.isfinite(values)]
     if finite.size == 0:
@@ -199,7 +206,8 @@ def cmd_estimate(args) -> int:
     bar = None if args.quiet else ProgressBar("estimate")
     t1 = time.perf_counter()
     res = estimate(cloud, method, fit=args.fit, preset=args.preset, orientation=args.orientation,
-                   viewpoint=args.viewpoint, workers=args.workers, progress=bar, **params)
+                   viewpoint=args.viewpoint, workers=args.workers, progress=bar,
+                   tile_points=args.tile_points, **params)
     t_est = time.perf_counter() - t1
     t2 = time.perf_counter()
     write(args.output, res, binary=not args.ascii)
@@ -219,8 +227,10 @@ def cmd_estimate(args) -> int:
             f"method      {res.info['method']} {res.info['params']}  fit {res.info['fit']}  "
             f"orientation {res.info['orientation']}",
             *([f"measured    spacing {plan['spacing']:.4g}, relative noise {plan['noise']:.4g}"
-               f" -> {'clean: implicit quadric' if plan['clean'] else 'noisy: normal-field'}"
-               f" regression"] if (plan := res.info.get("plan")) else []),
+               f" -> {BRANCHES[plan['clean']]}"] if (plan := res.info.get("plan")) else []),
+            *([f"tiles       {res.info['tiles']} of up to {res.info['tile_points']} points, "
+               f"halo up to {res.info['halo_max']:.4g} (widened {res.info['regrown']} times)"]
+              if "tiles" in res.info else []),
             f"ok          {counts.get('ok', 0)} ({counts.get('ok', 0) / n:.2%})",
             f"failures    {failed if failed else 'none'}",
             f"k1          {percentiles(res.k1)}",

@@ -42,8 +42,13 @@ PRESETS = {
     "paper": {"method": "tc", "fit": "implicit", "min_neighbors": 10},
 }
 DEFAULT_CHUNK = 32768
-# Clouds above this many points are processed tile by tile (tile_points=None).
-AUTO_TILE_POINTS = 2_000_000
+# Clouds above TILE_ABOVE points are processed in tiles of AUTO_TILE_POINTS (tile_points=None):
+# a tile's working set is about 550 bytes per tile point, beside about 200 per cloud point.
+TILE_ABOVE = 2_000_000
+AUTO_TILE_POINTS = 1_000_000
+# Tiles handed to an executor: small enough to spread over a cluster, large enough that the
+# halo (a few spacings around the tile) stays a small share of the work.
+EXECUTOR_TILE_POINTS = 250_000
 MIN_TILE_POINTS = 1000
 ProgressFn = Callable[[int, int], None]
 
@@ -129,7 +134,7 @@ METHODS = ("auto", *FINDERS)
 def estimate(points, method: str | None = None, *, fit: str | None = None, preset=None,
              orientation=None, normals=None, viewpoint=None, faces=None, workers=None,
              progress: ProgressFn | None = None, chunk_size: int = DEFAULT_CHUNK,
-             tile_points: int | None = None, **params) -> CurvatureResult:
+             tile_points: int | None = None, executor=None, **params) -> CurvatureResult:
     """Per-point curvature of a cloud by local surface fitting.
 
     Parameters
@@ -169,8 +174,14 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
     tile_points : int, optional
         Split the cloud into spatial tiles of about this many points, each computed with a
         halo that is checked to hold everything its points depend on (:mod:`curvature.tiling`);
-        results are identical to an untiled run. Default: tiles of 2M points above 2M points;
-        0 never tiles.
+        results are identical to an untiled run. Default: tiles of 1M points above 2M points
+        (250k with an ``executor``); 0 never tiles.
+    executor : object, optional
+        Where tiles are computed: anything whose ``submit(fn, arg)`` returns a future with
+        ``result()``, ``cancel()`` and ``add_done_callback()`` (a
+        ``concurrent.futures.Executor``, a Dask ``distributed.Client``). The cloud is then
+        always tiled; measurements, assembly and orientation stay in this process. Results
+        are identical to a local run.
     **params
         Method parameters (e.g. ``k=24`` for knn) and fit parameters (``solver``,
         ``include_self``).
@@ -200,7 +211,9 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
     vp = check_viewpoint(viewpoint)
     req = resolve_request(preset, method, fit, params, orientation, ref_normals, vp, workers,
                           chunk_size)
-    tiles = resolve_tile_points(tile_points, n)
+    if executor is not None and not callable(getattr(executor, "submit", None)):
+        raise ParameterError(f"executor must have a submit(fn, arg) method, got {executor!r}")
+    tiles = resolve_tile_points(tile_points, n, executor is not None)
 
     # Work on a Z-ordered copy so neighbor reads stay local; every per-point computation is
     # unchanged, and the outputs are put back in input order at the end.
@@ -217,7 +230,8 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
         else:
             from .tiling import run_tiled
 
-            res, graph, info, timings = run_tiled(spts, s_faces, req, tiles, progress)
+            res, graph, info, timings = run_tiled(spts, s_faces, req, tiles, progress,
+                                                  executor)
         t0 = time.perf_counter()
         orient(res, req.mode, s_normals, vp, graph)
         timings["orientation"] = time.perf_counter() - t0
@@ -273,16 +287,22 @@ def resolve_request(preset, method, fit, params, orientation, ref_normals, viewp
                    chunk_size)
 
 
-def resolve_tile_points(tile_points, n: int) -> int | None:
+def resolve_tile_points(tile_points, n: int, executor: bool = False) -> int | None:
     """Core points per tile, or None to run the cloud as one block.
 
-    ``None`` tiles clouds larger than :data:`AUTO_TILE_POINTS`; 0 never tiles.
+    ``None`` tiles clouds larger than :data:`TILE_ABOVE`; 0 never tiles. With an
+    executor the cloud is always tiled, by default in tiles of :data:`EXECUTOR_TILE_POINTS`
+    (0: one tile).
     """
-    if tile_points is None:
-        return AUTO_TILE_POINTS if n > AUTO_TILE_POINTS else None
-    if isinstance(tile_points, bool) or not isinstance(tile_points, int | np.integer) \
-            or tile_points < 0:
+    if tile_points is not None and (
+            isinstance(tile_points, bool) or not isinstance(tile_points, int | np.integer)
+            or tile_points < 0):
         raise ParameterError(f"tile_points must be a whole number >= 0, got {tile_points!r}")
+    if executor:
+        size = EXECUTOR_TILE_POINTS if tile_points is None else int(tile_points) or n
+        return max(min(size, n), min(MIN_TILE_POINTS, n))
+    if tile_points is None:
+        return AUTO_TILE_POINTS if n > TILE_ABOVE else None
     if tile_points == 0 or tile_points >= n:
         return None
     return max(int(tile_points), MIN_TILE_POINTS)
@@ -450,6 +470,11 @@ def neighborhood_reach(points, query, nbhd, radius=None) -> np.ndarray:
     return out
 
 
+# Result fields computed from k1 and k2 at the very end (never written before, so their pages
+# cost no memory while a big cloud is computed).
+DERIVED = ("mean", "gaussian")
+
+
 def empty_result(pts: np.ndarray, faces) -> CurvatureResult:
     """A result with every output array allocated (filled by the chunks)."""
     n = pts.shape[0]
@@ -463,11 +488,15 @@ def empty_result(pts: np.ndarray, faces) -> CurvatureResult:
 def unpermute(res: CurvatureResult, inv: np.ndarray, pts: np.ndarray, faces) -> CurvatureResult:
     """The result of the Z-ordered cloud in input order (``inv`` from inverse_permutation).
 
-    Fields are reordered one at a time, so at most one extra field is held at once.
+    Fields are reordered one at a time, so at most one extra field is held at once. Mean and
+    Gaussian curvature are derived afterwards, so they are left unfilled here.
     """
     fields = res.fields()
     for name in list(fields):
-        fields[name] = fields[name][inv]
+        if name in DERIVED:
+            fields[name] = np.empty(inv.shape[0])
+        else:
+            fields[name] = fields[name][inv]
         setattr(res, name, fields[name])
     return CurvatureResult(points=pts, faces=faces, **fields)
 

@@ -24,7 +24,9 @@ picklable description of one tile, :func:`compute_tile` computes it anywhere, an
 from __future__ import annotations
 
 import math
+import queue
 import time
+from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -33,13 +35,18 @@ from .auto import plan_auto
 from .neighborhoods import make_finder
 from .neighborhoods.kdtree import build_tree
 from .orientation import ORIENT_K
-from .pipeline import Request, compute_block, empty_result
+from .pipeline import DERIVED, Request, compute_block, empty_result, numba_threads
 
 # Halo guesses in spacings (distance to the 24th neighbor); a wrong guess costs a recomputation,
 # never a wrong result.
 AUTO_HALO = 16.0
 HALO_MARGIN = 1.5
 GROWTH = 1.5
+# Tiles handed to an executor at once: keeps every worker busy while bounding the memory of
+# tile inputs waiting to be sent.
+IN_FLIGHT = 8
+# Seconds between progress calls while waiting for tiles (they are also the cancellation check).
+WAIT_POLL = 0.5
 
 
 @dataclass(frozen=True)
@@ -146,13 +153,37 @@ def restrict_graph(graph: tuple, members: np.ndarray, n: int) -> tuple:
     return out_ptr, cols.astype(np.int64)
 
 
+def _cell_keys(points: np.ndarray, origin: np.ndarray, size: float) -> np.ndarray:
+    """One int64 per point naming its cube of side ``size`` (21 bits per axis)."""
+    c = np.floor((points - origin) / size).astype(np.int64) + 1  # >= 0 past the dilation
+    return (c[:, 0] << 42) | (c[:, 1] << 21) | c[:, 2]
+
+
+_OFFSETS = np.array([(dx << 42) + (dy << 21) + dz for dx in (-1, 0, 1) for dy in (-1, 0, 1)
+                     for dz in (-1, 0, 1)], np.int64)
+
+
 def tile_input(spts: np.ndarray, tile: Tile, req: Request, plan, mesh_graph=None) -> TileInput:
-    """The points of ``tile`` plus its halo, ready for :func:`compute_tile`."""
+    """The points of ``tile`` plus its halo, ready for :func:`compute_tile`.
+
+    The halo is every point within ``tile.halo`` of the tile's box that also lies in a cube
+    of side ``tile.halo`` next to a cube holding a tile point: a Z-order run can span two
+    separate regions, whose common box would hold far more than their surroundings.
+    """
     lo = np.asarray(tile.lo) - tile.halo
     hi = np.asarray(tile.hi) + tile.halo
     inside = np.all((spts >= lo) & (spts <= hi), axis=1)
     inside[tile.start:tile.stop] = True
     members = np.flatnonzero(inside).astype(np.int64)
+    del inside
+    if math.isfinite(tile.halo) and tile.halo > 0:
+        extent = (hi - lo) / tile.halo
+        if np.all(extent < (1 << 20)):  # keys fit their 21 bits
+            core = _cell_keys(spts[tile.start:tile.stop], lo, tile.halo)
+            near = np.unique((np.unique(core)[:, None] + _OFFSETS[None, :]).ravel())
+            keep = np.isin(_cell_keys(spts[members], lo, tile.halo), near)
+            keep[(members >= tile.start) & (members < tile.stop)] = True
+            members = members[keep]
     offset = int(np.searchsorted(members, tile.start))
     query = np.arange(offset, offset + tile.stop - tile.start, dtype=np.int64)
     graph = None if mesh_graph is None else restrict_graph(mesh_graph, members, spts.shape[0])
@@ -160,15 +191,37 @@ def tile_input(spts: np.ndarray, tile: Tile, req: Request, plan, mesh_graph=None
                      graph)
 
 
-def compute_tile(inp: TileInput) -> TileOutput:
-    """Compute one tile and check its halo (runs anywhere: a thread, a process, a cluster)."""
+def halo_room(core: np.ndarray, tile: Tile) -> np.ndarray:
+    """How far around each tile point the tile holds every point of the cloud, shape (c,).
+
+    The box grown by the halo holds everything within its faces' distance; the cube filter
+    of :func:`tile_input` keeps the 27 cubes around the point's own, so everything within the
+    halo plus the distance to its own cube's faces.
+    """
+    lo = np.asarray(tile.lo) - tile.halo
+    hi = np.asarray(tile.hi) + tile.halo
+    box = np.minimum((core - lo).min(axis=1), (hi - core).min(axis=1))
+    if not (math.isfinite(tile.halo) and tile.halo > 0):
+        return box
+    if not np.all((hi - lo) / tile.halo < (1 << 20)):
+        return box
+    frac = (core - lo) / tile.halo
+    inner = np.minimum(frac - np.floor(frac), np.ceil(frac) - frac).min(axis=1)
+    # (a hair less: a point on a cube face may round into the next cube)
+    return np.minimum(box, tile.halo * (1.0 + inner) * (1.0 - 1e-9))
+
+
+def compute_tile(inp: TileInput, progress=None) -> TileOutput:
+    """Compute one tile and check its halo (runs anywhere: a thread, a process, a cluster).
+
+    ``progress(fraction)``, if given, follows the tile's own work (local runs).
+    """
     t0 = time.perf_counter()
-    block = compute_block(inp.points, None, inp.request, inp.query, plan=inp.plan,
-                          mesh_graph=inp.mesh_graph, track_reach=True)
-    core = inp.points[inp.query]
-    lo = np.asarray(inp.tile.lo) - inp.tile.halo
-    hi = np.asarray(inp.tile.hi) + inp.tile.halo
-    room = np.minimum((core - lo).min(axis=1), (hi - core).min(axis=1))
+    step = None if progress is None else (lambda done, total: progress(done / max(total, 1)))
+    with numba_threads(inp.request.workers):
+        block = compute_block(inp.points, None, inp.request, inp.query, progress=step,
+                              plan=inp.plan, mesh_graph=inp.mesh_graph, track_reach=True)
+    room = halo_room(inp.points[inp.query], inp.tile)
     whole = inp.tile.halo == math.inf  # every point of the cloud is in the tile
     # a point must see strictly past its reach (NaN reach counts as short)
     short = ~(block.reach < room) & ~whole
@@ -176,7 +229,8 @@ def compute_tile(inp: TileInput) -> TileOutput:
     if block.graph is not None:
         graph = np.where(block.graph >= 0, inp.members[np.maximum(block.graph, 0)], -1)
         graph = graph.astype(np.int32)
-    fields = block.result.fields()
+    # mean and Gaussian curvature are derived after assembly: not sent back
+    fields = {k: v for k, v in block.result.fields().items() if k not in DERIVED}
     return TileOutput(inp.tile, fields, graph, int(short.sum()),
                       float(np.nanmax(block.reach)) if block.reach.size else 0.0, block.info,
                       time.perf_counter() - t0, int(inp.members.shape[0]))
@@ -242,7 +296,8 @@ class TiledRun:
             return grown(out.tile, out, self.extent)
         sl = slice(out.tile.start, out.tile.stop)
         for name, arr in out.fields.items():
-            getattr(self.result, name)[sl] = arr
+            if name not in DERIVED:
+                getattr(self.result, name)[sl] = arr
         if self.graph is not None:
             self.graph[sl] = out.graph
         self.tiles[out.tile.index] = out.tile
@@ -257,8 +312,8 @@ class TiledRun:
                 "halo_max": max(halos), "regrown": self.regrown}
 
 
-def run_tiled(spts, s_faces, req: Request, tile_points: int, progress=None):
-    """Compute a Z-ordered cloud tile by tile in this process.
+def run_tiled(spts, s_faces, req: Request, tile_points: int, progress=None, executor=None):
+    """Compute a Z-ordered cloud tile by tile, in this process or on ``executor``.
 
     Returns
     -------
@@ -271,14 +326,68 @@ def run_tiled(spts, s_faces, req: Request, tile_points: int, progress=None):
     t0 = time.perf_counter()
     run = TiledRun(spts, s_faces, req, tile_points)
     t_plan = time.perf_counter() - t0
-    for tile in list(run.tiles):
-        while tile is not None:
-            tile = run.accept(compute_tile(run.input(tile)))
-        if progress is not None:
-            progress(run.done, spts.shape[0])
-    timings = {"plan": t_plan, "tiles": run.seconds}
+    n = spts.shape[0]
+    if executor is None:
+        shown = [0]  # never backwards, even when a tile is computed again
+
+        def report(done):
+            shown[0] = max(shown[0], done)
+            progress(shown[0], n)
+
+        for tile in list(run.tiles):
+            inside = None
+            if progress is not None:  # the bar moves inside each tile too
+                size = tile.stop - tile.start
+
+                def inside(fraction, size=size):
+                    report(min(run.done + int(fraction * size), n - 1))
+
+            while tile is not None:
+                tile = run.accept(compute_tile(run.input(tile), inside))
+            if progress is not None:
+                report(run.done)
+    else:
+        run_on(executor, run, progress)
+    timings = {"plan": t_plan, "tiles": run.seconds, "wall": time.perf_counter() - t0 - t_plan}
     return run.result, run.graph, run.summary(), timings
 
 
+def run_on(executor, run: TiledRun, progress=None, in_flight: int | None = None) -> None:
+    """Compute every tile of ``run`` on ``executor``, at most ``in_flight`` at a time.
+
+    Tiles are accepted in the order they finish; a short halo sends its tile back with a wider
+    one. Any exception (a failed tile, or one raised by ``progress`` to cancel) cancels the
+    tiles still out and propagates. A tile lost with a worker is the executor's to recompute
+    (Dask does so by itself).
+    """
+    n = run.spts.shape[0]
+    in_flight = in_flight or IN_FLIGHT
+    finished: queue.SimpleQueue = queue.SimpleQueue()
+    todo = deque(run.tiles)
+    out: dict[int, object] = {}  # id(future) -> future
+    try:
+        while todo or out:
+            while todo and len(out) < in_flight:
+                future = executor.submit(compute_tile, run.input(todo.popleft()))
+                out[id(future)] = future
+                future.add_done_callback(finished.put)
+            try:
+                future = finished.get(timeout=WAIT_POLL)
+            except queue.Empty:
+                if progress is not None:
+                    progress(run.done, n)
+                continue
+            out.pop(id(future), None)
+            again = run.accept(future.result())
+            if again is not None:
+                todo.appendleft(again)
+            elif progress is not None:
+                progress(run.done, n)
+    except BaseException:
+        for future in out.values():
+            future.cancel()
+        raise
+
+
 __all__ = ["Tile", "TileInput", "TileOutput", "TiledRun", "compute_tile", "make_tiles",
-           "run_tiled", "tile_input"]
+           "run_on", "run_tiled", "tile_input"]

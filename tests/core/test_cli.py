@@ -45,9 +45,21 @@ def test_default_is_auto_and_reports_what_it_measured(sphere_file, tmp_path, cap
     assert main(["estimate", str(sphere_file), "-o", str(out)]) == 0
     err = capsys.readouterr().err
     assert "method      auto" in err
-    assert "relative noise" in err and "clean: implicit quadric" in err
+    assert "relative noise" in err and "-> clean: implicit quadric\n" in err
+    assert "tiles" not in err
     k1 = np.load(out)["k1"]
     assert np.allclose(k1, 0.5, rtol=1e-6)
+
+
+def test_tile_points_gives_the_same_result_and_says_so(sphere_file, tmp_path, capsys):
+    whole, tiled = tmp_path / "whole.npz", tmp_path / "tiled.npz"
+    assert main(["estimate", str(sphere_file), "-o", str(whole), "--tile-points", "0"]) == 0
+    assert main(["estimate", str(sphere_file), "-o", str(tiled), "--tile-points", "1000"]) == 0
+    err = capsys.readouterr().err
+    assert "tiles       " in err and "of up to 1000 points" in err
+    with np.load(whole) as a, np.load(tiled) as b:
+        for name in ("k1", "k2", "normals", "dir1", "status"):
+            np.testing.assert_array_equal(a[name], b[name], err_msg=name)
 
 
 def test_preset_paper(sphere_file, tmp_path, capsys):

@@ -92,3 +92,132 @@ def test_restrict_graph_keeps_edges_inside():
 def test_bad_tile_points(torus, bad):
     with pytest.raises(curvature.ParameterError, match="tile_points"):
         curvature.estimate(torus[:100], "knn", tile_points=bad)
+
+
+# -- executors --------------------------------------------------------------------------------
+
+class RecordingExecutor:
+    """A thread pool that records submissions and can fail one tile or cancel a run."""
+
+    def __init__(self, fail_tile=None):
+        from concurrent.futures import ThreadPoolExecutor
+
+        self.pool = ThreadPoolExecutor(2)
+        self.submitted: list[int] = []
+        self.futures = []
+        self.fail_tile = fail_tile
+
+    def submit(self, fn, inp):
+        self.submitted.append(inp.tile.index)
+        if inp.tile.index == self.fail_tile:
+            future = self.pool.submit(_fail, inp.tile.index)
+        else:
+            future = self.pool.submit(fn, inp)
+        self.futures.append(future)
+        return future
+
+
+def _fail(index):
+    raise RuntimeError(f"tile {index} failed on the worker")
+
+
+def test_executor_runs_equal_local_runs_for_any_pool(torus):
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
+
+    whole = curvature.estimate(torus, tile_points=0)
+    recorder = RecordingExecutor()
+    threads = curvature.estimate(torus, tile_points=1000, executor=recorder)
+    # every tile went out (some twice, when their first halo was short)
+    assert set(recorder.submitted) == set(range(8)) and threads.info["tiles"] == 8
+    assert len(recorder.submitted) == 8 + threads.info["regrown"]
+    assert_identical(whole, threads)
+    # numba's OpenMP layer forbids fork() after it started; a fork server is clean
+    with ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("forkserver")) as pool:
+        procs = curvature.estimate(torus, "tc", fit="monge", tile_points=2000, executor=pool)
+    assert_identical(curvature.estimate(torus, "tc", fit="monge", tile_points=0), procs)
+
+
+def test_executor_progress_is_per_tile_and_complete(torus):
+    seen = []
+    curvature.estimate(torus, "knn", tile_points=1000, executor=RecordingExecutor(),
+                       progress=lambda done, total: seen.append((done, total)))
+    dones = [d for d, _ in seen]
+    assert dones == sorted(dones) and dones[-1] == len(torus)
+    assert {total for _, total in seen} == {len(torus)}
+    assert len(set(dones) - {0}) == 8  # once per tile (and 0 while waiting for the first)
+
+
+def test_a_failed_tile_fails_the_run_and_cancels_the_rest(torus, monkeypatch):
+    monkeypatch.setattr(tiling, "IN_FLIGHT", 2)
+    recorder = RecordingExecutor(fail_tile=0)
+    with pytest.raises(RuntimeError, match="tile 0 failed"):
+        curvature.estimate(torus, "knn", tile_points=1000, executor=recorder)
+    assert len(recorder.submitted) < 8  # the window stopped further submissions
+    recorder.pool.shutdown(wait=True)
+    assert all(f.done() for f in recorder.futures)
+
+
+def test_progress_raising_cancels_the_tiles_still_out(torus, monkeypatch):
+    monkeypatch.setattr(tiling, "IN_FLIGHT", 2)
+
+    class Stop(Exception):
+        pass
+
+    def progress(done, total):
+        if done:
+            raise Stop
+
+    recorder = RecordingExecutor()
+    with pytest.raises(Stop):
+        curvature.estimate(torus, "knn", tile_points=1000, executor=recorder,
+                           progress=progress)
+    recorder.pool.shutdown(wait=True)
+    assert len(recorder.submitted) <= 3  # the first tile back stopped the run
+
+
+def test_executor_without_submit_is_a_parameter_error(torus):
+    with pytest.raises(curvature.ParameterError, match="submit"):
+        curvature.estimate(torus, executor=object())
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_tile_holds_every_point_within_each_core_points_room(seed):
+    from scipy.spatial import cKDTree
+
+    from curvature.spatial_order import morton_order
+
+    rng = np.random.default_rng(seed)
+    blobs = [rng.normal(c, 0.3, (3000, 3)) for c in ((0, 0, 0), (5, 1, 0), (2, 6, 3))]
+    pts = np.vstack(blobs)
+    spts = np.ascontiguousarray(pts[morton_order(pts)])
+    req = resolve_request(None, "knn", "monge", {"k": 12}, None, None, None, 1, 1000)
+    halo = float(rng.uniform(0.05, 0.6))
+    tiles = tiling.make_tiles(spts, 2500, halo)
+    tree = cKDTree(spts)
+    sizes = []
+    for tile in tiles:
+        inp = tiling.tile_input(spts, tile, req, None)
+        members = set(inp.members.tolist())
+        core = spts[tile.start:tile.stop]
+        room = tiling.halo_room(core, tile)
+        assert np.all(room >= halo * (1 - 1e-6))
+        for i in rng.choice(len(core), 60, replace=False):
+            near = tree.query_ball_point(core[i], room[i] * (1 - 1e-12))
+            assert members.issuperset(near), (tile.index, i)
+        sizes.append(len(members))
+    # a Z-order run spanning two blobs keeps their surroundings, not the box between them
+    box = [np.all((spts >= np.asarray(t.lo) - halo) & (spts <= np.asarray(t.hi) + halo),
+                  axis=1).sum() for t in tiles]
+    assert sum(sizes) <= sum(box)
+
+
+def test_local_tiled_progress_moves_inside_tiles_and_never_back(torus, monkeypatch):
+    monkeypatch.setattr(tiling, "AUTO_HALO", 0.5)  # short halos: some tiles run twice
+    seen = []
+    res = curvature.estimate(torus, tile_points=2000,
+                             progress=lambda done, total: seen.append((done, total)))
+    assert res.info["regrown"] > 0
+    dones = [d for d, _ in seen]
+    assert dones == sorted(dones) and dones[-1] == len(torus)
+    assert len(set(dones)) > 2 * res.info["tiles"]  # more steps than tiles
