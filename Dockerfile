@@ -7,7 +7,7 @@
 # give CURVATURE_API_KEYS, or CURVATURE_API_KEYS_FILE pointing at a mounted secret (one key a
 # line), or set CURVATURE_ALLOW_OPEN=true to run it open on purpose.
 
-# --- build: install the package and its service extra into a virtualenv -------------------
+# --- build: install the package, its service and dask extras into a virtualenv ------------
 FROM python:3.11-slim AS build
 ENV PIP_NO_CACHE_DIR=1 PIP_DISABLE_PIP_VERSION_CHECK=1
 RUN python -m venv /opt/venv
@@ -16,7 +16,9 @@ WORKDIR /src
 COPY pyproject.toml README.md ./
 COPY curvature ./curvature
 COPY service ./service
-RUN pip install --upgrade pip && pip install ".[service]"
+COPY curvature_client ./curvature_client
+# dask: the same image runs the Dask scheduler and workers of docker-compose's "dask" profile
+RUN pip install --upgrade pip && pip install ".[service,dask]"
 
 # --- runtime: the virtualenv only, run as an unprivileged user -----------------------------
 FROM python:3.11-slim AS runtime

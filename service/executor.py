@@ -26,7 +26,7 @@ from pathlib import Path
 
 import anyio.to_thread
 
-from . import result_files, worker
+from . import dask_tiles, result_files, worker
 from .metrics import ServiceMetrics
 from .problem_types import ProblemError
 from .problems import HTTPProblem
@@ -393,9 +393,41 @@ def _terminate(pool: ProcessPoolExecutor, grace: float = 2.0, kill: bool = False
     pool.shutdown(wait=True)
 
 
+class DaskExecutor(LocalPoolExecutor):
+    """The local pool drives each job; its tiles run as tasks on a Dask cluster.
+
+    Everything about jobs stays as with the local pool (the store holds the queue and the job
+    records, cancellation, time limits, crash recovery); each run only gets the scheduler's
+    address and connects to it (:mod:`service.dask_tiles`). The scheduler recomputes the
+    tiles of a worker that dies, so the job goes on.
+    """
+
+    @property
+    def _options(self) -> dict:
+        s = self.settings
+        return {**super()._options, "dask_address": s.dask_address,
+                "dask_tile_points": s.dask_tile_points,
+                "dask_connect_seconds": s.dask_connect_seconds}
+
+    async def start(self) -> None:
+        await super().start()
+        self._tasks.append(asyncio.create_task(self._probe_cluster()))
+
+    async def _probe_cluster(self) -> None:
+        """Say at startup whether the cluster answers (jobs connect by themselves)."""
+        address, timeout = self.settings.dask_address, self.settings.dask_connect_seconds
+        try:
+            count = await anyio.to_thread.run_sync(dask_tiles.cluster_workers, address,
+                                                   timeout)
+            log.info("Dask scheduler at %s has %d worker(s); tiles of %d points run there",
+                     address, count, self.settings.dask_tile_points)
+        except Exception as exc:  # jobs fail with 'cluster-unavailable' while it stays down
+            log.error("Dask scheduler at %s did not answer: %s", address, exc)
+
+
 def create_executor(settings: Settings, store: JobStore,
                     metrics: ServiceMetrics) -> LocalPoolExecutor:
     """The executor named by ``settings.executor``."""
     if settings.executor == "dask":
-        raise RuntimeError("CURVATURE_EXECUTOR=dask is not available yet; use 'local'")
+        return DaskExecutor(settings, store, metrics)
     return LocalPoolExecutor(settings, store, metrics)

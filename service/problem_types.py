@@ -78,6 +78,9 @@ _TYPES = [
                 "cheaper parameters."),
     ProblemType("not-ready", 503, "Service not ready",
                 "The service is starting or its job store or worker pool is unavailable."),
+    ProblemType("cluster-unavailable", 503, "Compute cluster unavailable",
+                "The Dask cluster (CURVATURE_DASK_ADDRESS) could not be reached, or lost the "
+                "job's tiles more often than it retries them."),
     ProblemType("worker-crashed", 500, "Worker crashed",
                 "The worker process running the job died repeatedly (e.g. out of memory)."),
     ProblemType("not-found", 404, "Not found", "No such path."),

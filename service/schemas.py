@@ -204,6 +204,8 @@ class JobResult(BaseModel):
     status_counts: dict[str, int] = Field(description="Number of points per status name.")
     dropped_points: int = 0
     compute_seconds: float | None = None
+    tiles: int | None = Field(None, description="Spatial tiles the cloud was computed in "
+                              "(executor 'dask', or clouds above 2M points).")
 
 
 class Job(BaseModel):

@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 from typing import Literal
 
-from pydantic import Field, SecretStr
+from pydantic import Field, SecretStr, model_validator
 from pydantic_settings import BaseSettings, SettingsConfigDict
 
 # forkserver forks workers from a small clean process that has already imported numpy/numba,
@@ -40,8 +40,15 @@ class Settings(BaseSettings):
         False, description="Allow listening on a non-loopback address without API keys.")
 
     executor: Literal["local", "dask"] = Field(
-        "local", description="'local': process pool on this machine; 'dask': not available yet.")
-    dask_address: str | None = Field(None, description="Scheduler address for executor 'dask'.")
+        "local", description="'local': jobs run in the process pool on this machine. 'dask': "
+        "the pool still drives each job (reading, planning, orientation, writing), but its "
+        "spatial tiles run as tasks on the Dask cluster at dask_address.")
+    dask_address: str | None = Field(
+        None, description="Scheduler address for executor 'dask', e.g. tcp://scheduler:8786.")
+    dask_tile_points: int = Field(
+        250_000, ge=1000, description="Points per tile sent to the Dask cluster.")
+    dask_connect_seconds: float = Field(
+        20, gt=0, description="How long a job waits to reach the Dask scheduler.")
     workers: int = Field(2, ge=1, le=256, description="Worker processes in the local pool.")
     start_method: Literal["spawn", "forkserver"] = Field(
         DEFAULT_START_METHOD, description="multiprocessing start method of the pool.")
@@ -84,6 +91,13 @@ class Settings(BaseSettings):
         0.5, gt=0, description="Minimum time between two progress writes of a job.")
     dispatch_poll_seconds: float = Field(
         1.0, gt=0, description="Dispatcher re-reads the queue at least this often.")
+
+    @model_validator(mode="after")
+    def _dask_needs_an_address(self) -> Settings:
+        if self.executor == "dask" and not self.dask_address:
+            raise ValueError("CURVATURE_EXECUTOR=dask needs CURVATURE_DASK_ADDRESS, the "
+                             "scheduler's address (e.g. tcp://scheduler:8786)")
+        return self
 
     @property
     def db_path(self) -> Path:

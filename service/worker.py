@@ -21,6 +21,7 @@ import numpy as np
 
 import curvature
 
+from .dask_tiles import cluster_problem, tile_options
 from .inputs import CloudInput, check_cloud, load_input
 from .problem_types import ProblemError
 from .result_files import CANONICAL_RESULT, save_canonical, write_result
@@ -103,11 +104,13 @@ def warmup() -> int:
 
 # -- computing -----------------------------------------------------------------------------
 
-def compute(cloud: CloudInput, params: dict, workers: int, progress=None):
+def compute(cloud: CloudInput, params: dict, workers: int, progress=None,
+            tiles: dict | None = None):
     """Call ``curvature.estimate`` with the validated job parameters.
 
     ``params`` is the JSON form of a :mod:`service.schemas` method model: ``method``, the
-    common fit/orientation fields, and the method's own parameters.
+    common fit/orientation fields, and the method's own parameters. ``tiles`` holds the
+    ``executor`` and ``tile_points`` of a run on a Dask cluster (:mod:`service.dask_tiles`).
     """
     p = dict(params)
     method = p.pop("method")
@@ -120,11 +123,17 @@ def compute(cloud: CloudInput, params: dict, workers: int, progress=None):
     try:
         result = curvature.estimate(cloud.points, method, normals=cloud.normals,
                                     faces=cloud.faces, workers=workers or None,
-                                    progress=progress, **common, **p)
+                                    progress=progress, **common, **(tiles or {}), **p)
     except curvature.ParameterError as exc:
         raise ProblemError("invalid-parameters", str(exc)) from None
     except curvature.CurvatureInputError as exc:
         raise ProblemError("invalid-cloud", str(exc)) from None
+    except Exception as exc:
+        problem = cluster_problem(exc) if tiles else None
+        if problem is None:
+            raise
+        log.error("cluster failure: %r", exc)
+        raise problem from None
     if result.faces is None and cloud.faces is not None:
         result.faces = cloud.faces  # the result PLY keeps the input mesh
     return result
@@ -134,7 +143,7 @@ def summarize(result, cloud: CloudInput, seconds: float) -> dict:
     """What a finished job reports besides its files."""
     return {"n_points": len(result), "status_counts": result.status_counts(),
             "dropped_points": cloud.dropped, "compute_seconds": round(seconds, 3),
-            "has_faces": result.faces is not None}
+            "has_faces": result.faces is not None, "tiles": result.info.get("tiles")}
 
 
 class ProgressReporter:
@@ -197,7 +206,8 @@ def run_job(db_path: str, jobs_dir: str, job_id: str, run_token: str, options: d
         The job, and the token that fences this run against stale ones.
     options : dict
         ``estimate_workers``, ``progress_interval``, ``result_ttl``, and optionally
-        ``time_limit`` (seconds), ``max_points`` and ``busy_timeout`` (seconds).
+        ``time_limit`` (seconds), ``max_points``, ``busy_timeout`` (seconds) and the Dask
+        options ``dask_address``, ``dask_tile_points``, ``dask_connect_seconds``.
 
     Returns
     -------
@@ -219,7 +229,8 @@ def run_job(db_path: str, jobs_dir: str, job_id: str, run_token: str, options: d
         store.set_points(job_id, run_token, len(cloud.points))
         check_point_limit(len(cloud.points), options.get("max_points"))
         reporter(_LOADED, force=True)
-        result = compute(cloud, job.params, options["estimate_workers"], reporter.on_estimate)
+        result = compute(cloud, job.params, options["estimate_workers"], reporter.on_estimate,
+                         tile_options(options))
         if reporter.aborted:
             raise JobAborted(job_id)
         reporter(_ESTIMATED, force=True)

@@ -67,7 +67,8 @@ def job_view(job: JobRecord) -> Job:
         result = JobResult(formats=list(RESULT_FORMATS),
                            status_counts=summary.get("status_counts", {}),
                            dropped_points=summary.get("dropped_points", 0),
-                           compute_seconds=summary.get("compute_seconds"))
+                           compute_seconds=summary.get("compute_seconds"),
+                           tiles=summary.get("tiles"))
     return Job(
         id=job.id, status=job.status, progress=min(max(job.progress, 0.0), 1.0),
         method=job.params.get("method", ""), params=job.params,

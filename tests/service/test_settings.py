@@ -46,14 +46,11 @@ def test_bad_values_are_refused(monkeypatch):
         Settings()
 
 
-def test_dask_executor_is_refused_clearly(tmp_path):
-    from service.executor import create_executor
-    from service.metrics import ServiceMetrics
-    from service.store import JobStore
-
-    settings = Settings(data_dir=tmp_path, executor="dask")
-    with pytest.raises(RuntimeError, match="dask"):
-        create_executor(settings, JobStore(settings.db_path), ServiceMetrics())
+def test_dask_executor_needs_a_scheduler_address(tmp_path):
+    with pytest.raises(ValidationError, match="CURVATURE_DASK_ADDRESS"):
+        Settings(data_dir=tmp_path, executor="dask")
+    settings = Settings(data_dir=tmp_path, executor="dask", dask_address="tcp://h:8786")
+    assert settings.dask_tile_points == 250_000
 
 
 def test_security_and_limit_settings_from_the_environment(monkeypatch, tmp_path):
