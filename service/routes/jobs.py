@@ -80,11 +80,27 @@ def job_view(job: JobRecord) -> Job:
         error=JobError(**job.error) if job.error else None, result=result, links=links)
 
 
-async def _load(store: JobStore, job_id: str, owner: str) -> JobRecord:
+async def load_owned_job(store: JobStore, job_id: str, owner: str) -> JobRecord:
     """The caller's job; another owner's job is answered exactly like a missing one."""
     job = await anyio.to_thread.run_sync(store.get, job_id)
     if job is None or job.owner != owner:
         raise HTTPProblem("job-not-found", f"no job with id {job_id!r}", job_id=job_id)
+    return job
+
+
+async def succeeded_job(store: JobStore, job_id: str, owner: str) -> JobRecord:
+    """The caller's job, which must have succeeded: 409 while queued or running (with
+    Retry-After), or when it failed or was cancelled."""
+    job = await load_owned_job(store, job_id, owner)
+    if job.status in (QUEUED, RUNNING):
+        raise HTTPProblem("result-not-ready", f"job {job_id} is {job.status} "
+                          f"({job.progress:.0%} done); retry later",
+                          headers={"Retry-After": "1"}, job_id=job_id, job_status=job.status)
+    if job.status == FAILED:
+        detail = (job.error or {}).get("detail", "the job failed")
+        raise HTTPProblem("job-failed", f"job {job_id} failed: {detail}", job_id=job_id)
+    if job.status == CANCELLED:
+        raise HTTPProblem("job-cancelled", f"job {job_id} was cancelled", job_id=job_id)
     return job
 
 
@@ -187,7 +203,7 @@ def list_jobs(
 async def get_job(job_id: str, owner: Annotated[str, Depends(owner_id)],
                   store: Annotated[JobStore, Depends(get_store)]) -> Job:
     """Another key's job is answered 404, like a job that does not exist."""
-    return job_view(await _load(store, job_id, owner))
+    return job_view(await load_owned_job(store, job_id, owner))
 
 
 @router.get(
@@ -213,16 +229,7 @@ async def get_result(
     ``application/x-npz``), else JSON. JSON is columnar with NaN as null; PLY is binary with
     the input faces; 409 while the job is queued or running."""
     fmt = negotiate(format, request.headers.get("accept"))
-    job = await _load(store, job_id, owner)
-    if job.status in (QUEUED, RUNNING):
-        raise HTTPProblem("result-not-ready", f"job {job_id} is {job.status} "
-                          f"({job.progress:.0%} done); retry later",
-                          headers={"Retry-After": "1"}, job_id=job_id, job_status=job.status)
-    if job.status == FAILED:
-        detail = (job.error or {}).get("detail", "the job failed")
-        raise HTTPProblem("job-failed", f"job {job_id} failed: {detail}", job_id=job_id)
-    if job.status == CANCELLED:
-        raise HTTPProblem("job-cancelled", f"job {job_id} was cancelled", job_id=job_id)
+    await succeeded_job(store, job_id, owner)
     try:
         path = await executor.render(settings.jobs_dir / job_id, fmt)
     except FileNotFoundError:  # deleted or expired while we looked
@@ -246,14 +253,14 @@ async def delete_job(
     """A queued or running job is cancelled (200 with the job, status ``cancelled``; a running
     computation stops at its next progress report). A finished job is deleted with its files
     (204)."""
-    job = await _load(store, job_id, owner)
+    job = await load_owned_job(store, job_id, owner)
     if not job.is_final:
         cancelled = await anyio.to_thread.run_sync(store.cancel, job_id,
                                                    settings.result_ttl_seconds)
         if cancelled is not None:
             executor.cancel(job_id)
             return job_view(cancelled)
-        job = await _load(store, job_id, owner)  # it finished meanwhile: delete it below
+        job = await load_owned_job(store, job_id, owner)  # it finished meanwhile: delete it below
     await anyio.to_thread.run_sync(store.delete, job_id)
     await anyio.to_thread.run_sync(remove_job_files, settings, job_id)
     return Response(status_code=204)

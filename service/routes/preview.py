@@ -17,8 +17,8 @@ from ..dependencies import get_settings, get_store, owner_id
 from ..problems import HTTPProblem, problem_responses
 from ..result_files import CANONICAL_RESULT
 from ..settings import Settings
-from ..store import CANCELLED, FAILED, QUEUED, RUNNING, JobStore
-from ..store import Job as JobRecord
+from ..store import JobStore
+from .jobs import succeeded_job
 
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
 
@@ -60,13 +60,6 @@ def _limiter(request: Request) -> anyio.CapacityLimiter:
     return limiter
 
 
-async def _owned_job(store: JobStore, job_id: str, owner: str) -> JobRecord:
-    job = await anyio.to_thread.run_sync(store.get, job_id)
-    if job is None or job.owner != owner:  # another owner's job does not exist for the caller
-        raise HTTPProblem("job-not-found", f"no job with id {job_id!r}", job_id=job_id)
-    return job
-
-
 @router.get(
     "/{job_id}/preview.png", summary="Picture of a finished job colored by curvature",
     response_class=FileResponse,
@@ -90,16 +83,7 @@ async def get_preview(
     between its 2nd and 98th percentile (symmetric around 0 with a diverging map for mean and
     Gaussian curvature); points without a value are grey. Large clouds are drawn from a
     fixed subsample of 400,000 points. Rendered on first request and kept with the job."""
-    job = await _owned_job(store, job_id, owner)
-    if job.status in (QUEUED, RUNNING):
-        raise HTTPProblem("result-not-ready", f"job {job_id} is {job.status} "
-                          f"({job.progress:.0%} done); retry later",
-                          headers={"Retry-After": "1"}, job_id=job_id, job_status=job.status)
-    if job.status == FAILED:
-        detail = (job.error or {}).get("detail", "the job failed")
-        raise HTTPProblem("job-failed", f"job {job_id} failed: {detail}", job_id=job_id)
-    if job.status == CANCELLED:
-        raise HTTPProblem("job-cancelled", f"job {job_id} was cancelled", job_id=job_id)
+    await succeeded_job(store, job_id, owner)
     try:
         path = await anyio.to_thread.run_sync(render_cached, settings.jobs_dir / job_id, field,
                                               view, limiter=_limiter(request))
