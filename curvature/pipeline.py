@@ -322,7 +322,6 @@ class Block:
         With ``track_reach``: a distance from each query point within which lies every point
         its result depends on.
     info, timings : dict
-    plan : AutoPlan or None
     """
 
     result: CurvatureResult
@@ -330,7 +329,6 @@ class Block:
     reach: np.ndarray | None
     info: dict
     timings: dict
-    plan: object = None
 
 
 def compute_block(spts, s_faces, req: Request, query=None, *, progress=None, plan=None,
@@ -371,7 +369,7 @@ def compute_block(spts, s_faces, req: Request, query=None, *, progress=None, pla
             res = select_rows(res, query, spts[query])
             graph = None if graph is None else graph[query]
         reach = None if run.reach is None else run.reach[query]
-        return Block(res, graph, reach, info, timings, run.plan)
+        return Block(res, graph, reach, info, timings)
     finder = make_finder(spts, req.method, faces=s_faces, **req.method_params)
     if mesh_graph is not None:
         finder.use_graph(mesh_graph)
@@ -404,15 +402,16 @@ def fit_chunks(spts, finder, res, graph, fit, fit_opts, nthreads, chunk_size, pr
     stage1 = stage1_radius = None
     reach = np.empty(m) if track_reach else None
     timings.update(neighbors=0.0, fit=0.0)
+    extra_k = finder.examined() if track_reach else 0
+    # one tree for every reach distance of this block
+    tree = build_tree(spts) if track_reach and (extra_k or fit == "nfr") else None
     if fit == "nfr":
         t0 = time.perf_counter()
         stage1 = stage1_normals(spts, make_finder(spts, "knn", k=fit_opts["normal_k"]),
                                 chunk_size, nthreads)
         if track_reach:
-            stage1_radius = kth_distance(spts, fit_opts["normal_k"])
+            stage1_radius = kth_distance(spts, fit_opts["normal_k"], tree=tree)
         timings["stage1_normals"] = time.perf_counter() - t0
-    extra_k = finder.examined() if track_reach else 0
-    tree = build_tree(spts) if extra_k else None
     for start in range(0, m, chunk_size):
         stop = min(start + chunk_size, m)
         q = query[start:stop]

@@ -101,7 +101,6 @@ class TileOutput:
     needed: float
     info: dict
     seconds: float
-    members: int = 0
 
 
 def halo_guess(req: Request, spacing: float) -> float:
@@ -163,6 +162,16 @@ _OFFSETS = np.array([(dx << 42) + (dy << 21) + dz for dx in (-1, 0, 1) for dy in
                      for dz in (-1, 0, 1)], np.int64)
 
 
+def _halo_box(tile: Tile) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Corners of the tile's box grown by its halo, and whether the cube filter applies
+    (a finite halo whose cubes' keys fit their 21 bits)."""
+    lo = np.asarray(tile.lo) - tile.halo
+    hi = np.asarray(tile.hi) + tile.halo
+    cubes = math.isfinite(tile.halo) and tile.halo > 0 \
+        and bool(np.all((hi - lo) / tile.halo < (1 << 20)))
+    return lo, hi, cubes
+
+
 def tile_input(spts: np.ndarray, tile: Tile, req: Request, plan, mesh_graph=None) -> TileInput:
     """The points of ``tile`` plus its halo, ready for :func:`compute_tile`.
 
@@ -170,20 +179,17 @@ def tile_input(spts: np.ndarray, tile: Tile, req: Request, plan, mesh_graph=None
     of side ``tile.halo`` next to a cube holding a tile point: a Z-order run can span two
     separate regions, whose common box would hold far more than their surroundings.
     """
-    lo = np.asarray(tile.lo) - tile.halo
-    hi = np.asarray(tile.hi) + tile.halo
+    lo, hi, cubes = _halo_box(tile)
     inside = np.all((spts >= lo) & (spts <= hi), axis=1)
     inside[tile.start:tile.stop] = True
     members = np.flatnonzero(inside).astype(np.int64)
     del inside
-    if math.isfinite(tile.halo) and tile.halo > 0:
-        extent = (hi - lo) / tile.halo
-        if np.all(extent < (1 << 20)):  # keys fit their 21 bits
-            core = _cell_keys(spts[tile.start:tile.stop], lo, tile.halo)
-            near = np.unique((np.unique(core)[:, None] + _OFFSETS[None, :]).ravel())
-            keep = np.isin(_cell_keys(spts[members], lo, tile.halo), near)
-            keep[(members >= tile.start) & (members < tile.stop)] = True
-            members = members[keep]
+    if cubes:
+        core = _cell_keys(spts[tile.start:tile.stop], lo, tile.halo)
+        near = np.unique((np.unique(core)[:, None] + _OFFSETS[None, :]).ravel())
+        keep = np.isin(_cell_keys(spts[members], lo, tile.halo), near)
+        keep[(members >= tile.start) & (members < tile.stop)] = True
+        members = members[keep]
     offset = int(np.searchsorted(members, tile.start))
     query = np.arange(offset, offset + tile.stop - tile.start, dtype=np.int64)
     graph = None if mesh_graph is None else restrict_graph(mesh_graph, members, spts.shape[0])
@@ -198,12 +204,9 @@ def halo_room(core: np.ndarray, tile: Tile) -> np.ndarray:
     of :func:`tile_input` keeps the 27 cubes around the point's own, so everything within the
     halo plus the distance to its own cube's faces.
     """
-    lo = np.asarray(tile.lo) - tile.halo
-    hi = np.asarray(tile.hi) + tile.halo
+    lo, hi, cubes = _halo_box(tile)
     box = np.minimum((core - lo).min(axis=1), (hi - core).min(axis=1))
-    if not (math.isfinite(tile.halo) and tile.halo > 0):
-        return box
-    if not np.all((hi - lo) / tile.halo < (1 << 20)):
+    if not cubes:
         return box
     frac = (core - lo) / tile.halo
     inner = np.minimum(frac - np.floor(frac), np.ceil(frac) - frac).min(axis=1)
@@ -233,7 +236,7 @@ def compute_tile(inp: TileInput, progress=None) -> TileOutput:
     fields = {k: v for k, v in block.result.fields().items() if k not in DERIVED}
     return TileOutput(inp.tile, fields, graph, int(short.sum()),
                       float(np.nanmax(block.reach)) if block.reach.size else 0.0, block.info,
-                      time.perf_counter() - t0, int(inp.members.shape[0]))
+                      time.perf_counter() - t0)
 
 
 def grown(tile: Tile, out: TileOutput, extent: float) -> Tile:

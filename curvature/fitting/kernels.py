@@ -29,6 +29,7 @@ from .quadric import (
     foot_point,
     sampson_rms,
     shape_operator,
+    store_outputs,
 )
 
 FIT_IMPLICIT = 0
@@ -292,15 +293,8 @@ def fit_batch(points, query, indptr, indices, fit, solver, include_self,
         res = sampson_rms(a, b, c, xs) * scale
         c1 /= scale
         c2 /= scale
-        if not (np.isfinite(c1) and np.isfinite(c2) and np.all(np.isfinite(n))
-                and np.all(np.isfinite(d1))):
+        if not store_outputs(j, c1, c2, n, d1, d2, k1, k2, normals, dir1, dir2):
             status[j] = NON_FINITE
             continue
-        k1[j] = c1
-        k2[j] = c2
         residual[j] = res
-        for d in range(3):
-            normals[j, d] = n[d]
-            dir1[j, d] = d1[d]
-            dir2[j, d] = d2[d]
         status[j] = OK

@@ -21,6 +21,7 @@ from .quadric import (
     OK,
     TOO_FEW,
     clear_outputs,
+    store_outputs,
     tangent_basis,
     tangent_eigen,
 )
@@ -239,16 +240,7 @@ def curvature_from_field(coef, h, n_p, t1, t2, u1, u2, j, k1, k2, normals, dir1,
     d1 = d1 - np.sum(d1 * nn) * nn
     d1 /= np.sqrt(np.sum(d1 * d1))
     d2 = np.cross(nn, d1)
-    if not (np.isfinite(c1) and np.isfinite(c2) and np.all(np.isfinite(nn))
-            and np.all(np.isfinite(d1))):
-        return False
-    k1[j] = c1
-    k2[j] = c2
-    for d in range(3):
-        normals[j, d] = nn[d]
-        dir1[j, d] = d1[d]
-        dir2[j, d] = d2[d]
-    return True
+    return store_outputs(j, c1, c2, nn, d1, d2, k1, k2, normals, dir1, dir2)
 
 
 @njit(parallel=True, cache=True)

@@ -130,6 +130,27 @@ def clear_outputs(j, k1, k2, residual, normals, dir1, dir2):
 
 
 @njit(cache=True)
+def store_outputs(j, c1, c2, n, d1, d2, k1, k2, normals, dir1, dir2):
+    """Write query ``j``'s curvatures, normal and directions if all are finite.
+
+    Returns
+    -------
+    bool
+        False (nothing written) when a value is NaN or infinite.
+    """
+    if not (np.isfinite(c1) and np.isfinite(c2) and np.all(np.isfinite(n))
+            and np.all(np.isfinite(d1))):
+        return False
+    k1[j] = c1
+    k2[j] = c2
+    for d in range(3):
+        normals[j, d] = n[d]
+        dir1[j, d] = d1[d]
+        dir2[j, d] = d2[d]
+    return True
+
+
+@njit(cache=True)
 def shape_operator(g, hess):
     """Principal curvatures and directions of an implicit surface at a point.
 
