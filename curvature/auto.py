@@ -30,6 +30,7 @@ from numba import njit
 
 from .fitting.kernels import FIT_IMPLICIT, FIT_MONGE, SOLVER_TAUBIN, fit_batch
 from .fitting.normal_field import N_TERMS, nfr_anchor_fits, nfr_from_anchors, pca_normals
+from .fitting.normal_quadric import N_QUAD
 from .neighborhoods.kdtree import build_tree, knn_parallel
 from .params import ParamSpec
 from .status import Status
@@ -38,6 +39,10 @@ AUTO_PARAMS = (
     ParamSpec("k", int, 384, 48, 1024,
               help="neighbors of the normal-field regression on noisy clouds (second pass: k/2)"),
     ParamSpec("normal_k", int, 48, 12, 256, help="neighbors of the stage-1 PCA normals"),
+    ParamSpec("nfr_ratio", float, 0.7, 0.0, 1e6,
+              help="the cubic normal field replaces the normal-constrained quadric at an anchor "
+                   "where its normal misfit is below this fraction of the quadric's (0: quadric "
+                   "everywhere; large: field everywhere)"),
     ParamSpec("noise_threshold", float, 0.01, 0.0, 1.0,
               help="relative noise (RMS residual / spacing) below which a cloud counts as clean "
                    "and gets the implicit quadric over 24 neighbors"),
@@ -372,6 +377,8 @@ class AutoRun:
         coef = np.empty((a, 2, N_TERMS))
         scale, resid = np.empty(a), np.empty(a)
         frame = np.empty((a, 3, 3))
+        quad, quad_scale = np.empty((a, N_QUAD)), np.empty(a)
+        model = np.empty(a, np.int8)
         status = np.empty(a, np.int8)
         reach = np.empty(a) if self.track_reach else None
         # Neighbor lists are k long: chunk by neighbor entries, not anchors, so a chunk holds
@@ -379,13 +386,14 @@ class AutoRun:
         step = max(64, self.chunk_size * 24 // max(k, 24))
         for sl in (slice(i, min(i + step, a)) for i in range(0, a, step)):
             indptr, indices, d2 = knn_csr(self.points, self.tree, anchors[sl], k)
-            nfr_anchor_fits(self.points, field, anchors[sl], indptr, indices, coef[sl],
-                            scale[sl], frame[sl], resid[sl], status[sl])
+            nfr_anchor_fits(self.points, field, anchors[sl], indptr, indices,
+                            self.params["nfr_ratio"], coef[sl], scale[sl], frame[sl], quad[sl],
+                            quad_scale[sl], model[sl], resid[sl], status[sl])
             if reach is not None:
                 nbr = indices.reshape(-1, k)
                 reach[sl] = np.maximum((np.sqrt(d2) + w[nbr]).max(axis=1), w[anchors[sl]])
             self._tick(sl.stop - sl.start)
-        return (coef, scale, frame, resid, status), reach
+        return (coef, scale, frame, quad, quad_scale, model, resid, status), reach
 
     def _refined_field(self, field, anchors, owner, fits):
         """First-pass normals at every point, computed in chunks (``field`` where failed)."""

@@ -15,6 +15,7 @@ from numba import njit, prange
 
 from .kernels import gather_local, principal_axes
 from .linalg import cholesky, solve_lower, solve_upper_t
+from .normal_quadric import curvature_from_quadric, regress_normal_quadric
 from .quadric import (
     DEGENERATE,
     NON_FINITE,
@@ -29,6 +30,11 @@ from .quadric import (
 # Constant, 2 linear, 3 quadratic and 4 cubic monomials of the tangent coordinates.
 N_TERMS = 10
 MIN_POINTS_NFR = 12
+# Which model an anchor keeps (nfr_anchor_fits).
+MODEL_FIELD = 0
+MODEL_QUADRIC = 1
+# A quadric's foot point farther than this many fit radii from the query point is rejected.
+FOOT_LIMIT = 4.0
 
 
 @njit(parallel=True, cache=True)
@@ -125,14 +131,18 @@ def regress_normals(points, field, p, nbr, include_self, coef):
     residual : float
         RMS height of the fitted points above the osculating paraboloid of the fitted shape
         operator.
+    misfit : float
+        Mean squared residual of the fitted tangent normal components (about the squared
+        angle between each normal and the field; compared with the normal-constrained
+        quadric's misfit to choose between the two models).
     """
     m = nbr.shape[0] + (1 if include_self else 0)
     n_p = field[p]
     t1, t2 = tangent_basis(np.array([1.0, 0.0, 0.0]))
     if m < MIN_POINTS_NFR:
-        return TOO_FEW, 0.0, t1, t2, np.nan
+        return TOO_FEW, 0.0, t1, t2, np.nan, np.nan
     if not np.all(np.isfinite(n_p)):
-        return DEGENERATE, 0.0, t1, t2, np.nan
+        return DEGENERATE, 0.0, t1, t2, np.nan, np.nan
     t1, t2 = tangent_basis(n_p)
     # Tangent coordinates, tangent normal components (neighbor normals flipped to agree with
     # p's) and heights of the fitted points; p itself is row 0 when included.
@@ -160,10 +170,10 @@ def regress_normals(points, field, p, nbr, include_self, coef):
         hgt[ok_pts] = dx * nx + dy * ny + dz * nz
         ok_pts += 1
     if ok_pts < MIN_POINTS_NFR:
-        return TOO_FEW, 0.0, t1, t2, np.nan
+        return TOO_FEW, 0.0, t1, t2, np.nan, np.nan
     h = np.sqrt(np.sum(uv[:ok_pts] ** 2) / ok_pts)
     if not h > 0.0:
-        return DEGENERATE, 0.0, t1, t2, np.nan
+        return DEGENERATE, 0.0, t1, t2, np.nan, np.nan
     ata = np.zeros((N_TERMS, N_TERMS))
     atg = np.zeros((N_TERMS, 2))
     for i in range(ok_pts):
@@ -178,7 +188,7 @@ def regress_normals(points, field, p, nbr, include_self, coef):
             ata[c, r] = ata[r, c]
     l, good = cholesky(ata, 1e-12)
     if not good:
-        return DEGENERATE, h, t1, t2, np.nan
+        return DEGENERATE, h, t1, t2, np.nan, np.nan
     beta0 = solve_upper_t(l, solve_lower(l, atg[:, 0].copy()))
     beta1 = solve_upper_t(l, solve_lower(l, atg[:, 1].copy()))
     for r in range(N_TERMS):
@@ -195,11 +205,19 @@ def regress_normals(points, field, p, nbr, include_self, coef):
         off += hgt[i] + 0.5 * (s11 * u1 * u1 + 2.0 * s12 * u1 * u2 + s22 * u2 * u2)
     off /= ok_pts
     ss = 0.0
+    mis = 0.0
     for i in range(ok_pts):
         u1, u2 = uv[i, 0], uv[i, 1]
         dev = hgt[i] + 0.5 * (s11 * u1 * u1 + 2.0 * s12 * u1 * u2 + s22 * u2 * u2) - off
         ss += dev * dev
-    return OK, h, t1, t2, np.sqrt(ss / ok_pts)
+        _terms(u1 / h, u2 / h, row)
+        r0 = g[i, 0]
+        r1 = g[i, 1]
+        for r in range(N_TERMS):
+            r0 -= beta0[r] * row[r]
+            r1 -= beta1[r] * row[r]
+        mis += r0 * r0 + r1 * r1
+    return OK, h, t1, t2, np.sqrt(ss / ok_pts), mis / ok_pts
 
 
 @njit(cache=True)
@@ -265,8 +283,9 @@ def nfr_batch(points, stage1, query, indptr, indices, include_self,
         coef = np.empty((2, N_TERMS))  # per iteration: a buffer shared by threads would race
         clear_outputs(j, k1, k2, residual, normals, dir1, dir2)
         p = query[j]
-        st, h, t1, t2, res = regress_normals(points, stage1, p, indices[indptr[j]:indptr[j + 1]],
-                                             include_self, coef)
+        st, h, t1, t2, res, _ = regress_normals(points, stage1, p,
+                                                indices[indptr[j]:indptr[j + 1]],
+                                                include_self, coef)
         if st != OK:
             status[j] = st
             continue
@@ -280,9 +299,15 @@ def nfr_batch(points, stage1, query, indptr, indices, include_self,
 
 
 @njit(parallel=True, cache=True)
-def nfr_anchor_fits(points, field, anchors, indptr, indices, coef, scale, frame, residual,
-                    status):
-    """Normal-field regressions at anchor points, kept as coefficients for nearby points.
+def nfr_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, coef, scale, frame,
+                    quad, quad_scale, model, residual, status):
+    """Normal-field fits at anchor points, kept as coefficients for nearby points.
+
+    Every anchor fits both the cubic normal field (:func:`regress_normals`) and the
+    normal-constrained quadric (:mod:`curvature.fitting.normal_quadric`) to the same normals,
+    and keeps the field only where it fits the normals clearly better: its misfit below
+    ``nfr_ratio`` times the quadric's. The quadric averages noise better and is exact on every
+    quadric surface; the field follows surfaces that are no quadric at the fit's scale.
 
     Parameters
     ----------
@@ -293,30 +318,48 @@ def nfr_anchor_fits(points, field, anchors, indptr, indices, coef, scale, frame,
         Anchor point indices.
     indptr, indices : ndarray
         CSR neighborhoods of the anchors (anchor not listed; it takes part in its fit).
+    nfr_ratio : float
+        Misfit ratio below which the cubic field is kept (0: always the quadric; inf: always
+        the field).
     coef : ndarray, shape (a, 2, N_TERMS)
-    scale, residual : ndarray, shape (a,)
+    scale : ndarray, shape (a,)
     frame : ndarray, shape (a, 3, 3)
-        Outputs: coefficients, monomial unit h, rows (t1, t2, n) of the fit's frame, residual.
+        Outputs of the field: coefficients, monomial unit h, rows (t1, t2, n) of its frame.
+    quad : ndarray, shape (a, N_QUAD)
+    quad_scale : ndarray, shape (a,)
+        Outputs of the quadric: coefficients and coordinate unit.
+    model : ndarray, shape (a,), int8
+        Output: MODEL_FIELD or MODEL_QUADRIC, the model kept.
+    residual : ndarray, shape (a,)
+        Output: the kept model's residual distance.
     status : ndarray, shape (a,), int8
         Output status of each anchor's fit.
     """
     for j in prange(anchors.shape[0]):
         p = anchors[j]
-        st, h, t1, t2, res = regress_normals(points, field, p, indices[indptr[j]:indptr[j + 1]],
-                                             True, coef[j])
-        status[j] = st
+        nbr = indices[indptr[j]:indptr[j + 1]]
+        st, h, t1, t2, res, mis = regress_normals(points, field, p, nbr, True, coef[j])
+        qst, qh, qmis, qres = regress_normal_quadric(points, field, p, nbr, True, quad[j])
         scale[j] = h
-        residual[j] = res
+        quad_scale[j] = qh
         for d in range(3):
             frame[j, 0, d] = t1[d]
             frame[j, 1, d] = t2[d]
             frame[j, 2, d] = field[p, d]
+        if qst == OK and not (st == OK and mis < nfr_ratio * qmis):
+            model[j] = MODEL_QUADRIC
+            status[j] = OK
+            residual[j] = qres
+        else:
+            model[j] = MODEL_FIELD
+            status[j] = st
+            residual[j] = res
 
 
 @njit(parallel=True, cache=True)
-def nfr_from_anchors(points, query, owner, anchors, coef, scale, frame, fit_residual,
-                     fit_status, k1, k2, normals, dir1, dir2, residual, status):
-    """Curvature of query points from the fitted normal field of their anchor.
+def nfr_from_anchors(points, query, owner, anchors, coef, scale, frame, quad, quad_scale, model,
+                     fit_residual, fit_status, k1, k2, normals, dir1, dir2, residual, status):
+    """Curvature of query points from the model fitted at their anchor.
 
     Parameters
     ----------
@@ -325,13 +368,14 @@ def nfr_from_anchors(points, query, owner, anchors, coef, scale, frame, fit_resi
         Query point indices.
     owner : ndarray, shape (m,), int64
         Index into ``anchors`` of each query point's anchor.
-    anchors, coef, scale, frame, fit_residual, fit_status
+    anchors, coef, scale, frame, quad, quad_scale, model, fit_residual, fit_status
         As written by :func:`nfr_anchor_fits`.
     k1, k2, residual : ndarray, shape (m,)
     normals, dir1, dir2 : ndarray, shape (m, 3)
     status : ndarray, shape (m,), int8
-        Outputs as in ``fit_batch``; the residual is the anchor fit's. Normals take the sign of
-        the anchor's frame.
+        Outputs as in ``fit_batch``; the residual is the anchor fit's. Normals are on the side
+        of the anchor's normal. The field is read at the point's tangent position; the quadric
+        at the point's foot point on it.
     """
     for j in prange(query.shape[0]):
         clear_outputs(j, k1, k2, residual, normals, dir1, dir2)
@@ -344,14 +388,26 @@ def nfr_from_anchors(points, query, owner, anchors, coef, scale, frame, fit_resi
         dx = points[p, 0] - points[c, 0]
         dy = points[p, 1] - points[c, 1]
         dz = points[p, 2] - points[c, 2]
-        t1 = frame[a, 0]
-        t2 = frame[a, 1]
-        u1 = dx * t1[0] + dy * t1[1] + dz * t1[2]
-        u2 = dx * t2[0] + dy * t2[1] + dz * t2[2]
-        if not curvature_from_field(coef[a], scale[a], frame[a, 2], t1, t2, u1, u2, j,
-                                    k1, k2, normals, dir1, dir2):
-            clear_outputs(j, k1, k2, residual, normals, dir1, dir2)
-            status[j] = NON_FINITE
-            continue
+        if model[a] == MODEL_QUADRIC:
+            hq = quad_scale[a]
+            st, c1, c2, nn, d1, d2 = curvature_from_quadric(
+                quad[a], hq, np.array([dx / hq, dy / hq, dz / hq]), FOOT_LIMIT)
+            if st != OK:
+                status[j] = st
+                continue
+            if not store_outputs(j, c1, c2, nn, d1, d2, k1, k2, normals, dir1, dir2):
+                clear_outputs(j, k1, k2, residual, normals, dir1, dir2)
+                status[j] = NON_FINITE
+                continue
+        else:
+            t1 = frame[a, 0]
+            t2 = frame[a, 1]
+            u1 = dx * t1[0] + dy * t1[1] + dz * t1[2]
+            u2 = dx * t2[0] + dy * t2[1] + dz * t2[2]
+            if not curvature_from_field(coef[a], scale[a], frame[a, 2], t1, t2, u1, u2, j,
+                                        k1, k2, normals, dir1, dir2):
+                clear_outputs(j, k1, k2, residual, normals, dir1, dir2)
+                status[j] = NON_FINITE
+                continue
         residual[j] = fit_residual[a]
         status[j] = OK
