@@ -8,13 +8,16 @@ On noisy scans the neighborhood size decides the error far more than the fit mod
    over 24 neighbors), relative to that spacing.
 2. **Clean clouds** (relative noise below ``noise_threshold``): the paper's implicit quadric over
    24 neighbors, which is exact on quadrics and within a few 0.1 % elsewhere.
-3. **Noisy clouds**: normal-field regression (:mod:`curvature.fitting.normal_field`) over ``k``
-   neighbors, which averages noise away without the bias a quadric shows at that scale. Stage-1
-   PCA normals (``normal_k`` neighbors) are regressed on tangent position around *anchors*, one
-   point per grid cell of 1.5 spacings; every point reads its curvature off its cell anchor's
-   fitted normal field at its own position. A second pass over ``k / 2`` neighbors regresses the
-   normals of the first pass. Anchors cut the work of the large fits about thirteenfold at no
-   measured loss of accuracy; the second pass halves the noise error.
+3. **Noisy clouds**: normal fits over ``k`` neighbors, which average noise away. Stage-1 PCA
+   normals (``normal_k`` neighbors) are fitted around *anchors*, one point per grid cell of 1.5
+   spacings, by two models (:func:`~curvature.fitting.normal_field.nfr_anchor_fits`): the
+   normal-constrained quadric (normals along the gradient of a quadric; exact on every quadric
+   at any size, 9 unknowns) and, where it fits the normals clearly better (misfit below
+   ``nfr_ratio`` times the quadric's), the cubic normal field (20 unknowns; follows surfaces that
+   are no quadric at this scale, such as a torus's inner side). Every point reads its curvature
+   off its cell anchor's model at its own position. A second pass, same size, fits the normals
+   of the first. Anchors cut the work of the large fits about thirteenfold at no measured loss
+   of accuracy; the second pass lowers the noise error by a third to a half.
 
 Everything depends on the points' coordinates only, never on their order, so the results are
 identical for any point order and any ``workers``.
@@ -37,7 +40,7 @@ from .status import Status
 
 AUTO_PARAMS = (
     ParamSpec("k", int, 384, 48, 1024,
-              help="neighbors of the normal-field regression on noisy clouds (second pass: k/2)"),
+              help="neighbors of the normal fits on noisy clouds (both passes)"),
     ParamSpec("normal_k", int, 48, 12, 256, help="neighbors of the stage-1 PCA normals"),
     ParamSpec("nfr_ratio", float, 0.7, 0.0, 1e6,
               help="the cubic normal field replaces the normal-constrained quadric at an anchor "
@@ -318,21 +321,20 @@ class AutoRun:
         return field, (r_normal, r_fit)
 
     def _anchored(self, res, field, r_normal, reps, owner, kc) -> None:
-        """Two passes of anchored normal-field regression over every point."""
+        """Two passes of anchored normal fits over ``kc`` neighbors of every anchor."""
         points = self.points
         query = np.arange(points.shape[0], dtype=np.int64)
         # How far the first pass's normal of each point depends on: its anchor's fit reads
         # stage-1 normals of the anchor's neighbors, each made from their own neighbors.
         w = r_normal
-        for k_pass, last in ((kc, False), (max(kc // 2, 12), True)):
+        for last in (False, True):
             t0 = time.perf_counter()
-            fits, fit_reach = self._fit_anchors(reps, field, min(k_pass, points.shape[0] - 1),
-                                                w)
+            fits, fit_reach = self._fit_anchors(reps, field, kc, w)
             if last:
                 for sl in self._chunks(query.shape[0]):
                     out = _OutputView(res, query[sl])
                     nfr_from_anchors(points, query[sl], owner[sl], reps, *fits, *out.arrays)
-                    out.store(k_pass)
+                    out.store(kc)
                     self._tick(sl.stop - sl.start)
             else:
                 # Refined normals of every point: the first pass's field at the point.

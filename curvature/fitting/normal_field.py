@@ -33,6 +33,9 @@ MIN_POINTS_NFR = 12
 # Which model an anchor keeps (nfr_anchor_fits).
 MODEL_FIELD = 0
 MODEL_QUADRIC = 1
+# A quadric misfit below this (normals within about 1e-6 rad of the model) is an exact fit,
+# kept whatever the field's misfit (both are then round-off).
+EXACT_MISFIT = 1e-12
 # A quadric's foot point farther than this many fit radii from the query point is rejected.
 FOOT_LIMIT = 4.0
 
@@ -306,7 +309,7 @@ def nfr_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, coef, sc
     Every anchor fits both the cubic normal field (:func:`regress_normals`) and the
     normal-constrained quadric (:mod:`curvature.fitting.normal_quadric`) to the same normals,
     and keeps the field only where it fits the normals clearly better: its misfit below
-    ``nfr_ratio`` times the quadric's. The quadric averages noise better and is exact on every
+    ``nfr_ratio`` times the quadric's, and the quadric's not exact (``EXACT_MISFIT``). The quadric averages noise better and is exact on every
     quadric surface; the field follows surfaces that are no quadric at the fit's scale.
 
     Parameters
@@ -346,7 +349,7 @@ def nfr_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, coef, sc
             frame[j, 0, d] = t1[d]
             frame[j, 1, d] = t2[d]
             frame[j, 2, d] = field[p, d]
-        if qst == OK and not (st == OK and mis < nfr_ratio * qmis):
+        if qst == OK and not (st == OK and qmis > EXACT_MISFIT and mis < nfr_ratio * qmis):
             model[j] = MODEL_QUADRIC
             status[j] = OK
             residual[j] = qres

@@ -30,7 +30,7 @@ N_UNKNOWNS = 9
 MIN_POINTS_NQ = 12
 # Relative ridge on the normal matrix: a plane (all normals equal) leaves a two-dimensional
 # null space (b along n, a = n n'); the ridge picks its smallest member, which has no curvature.
-RIDGE = 1e-9
+RIDGE = 1e-12
 
 
 @njit(cache=True)
