@@ -177,7 +177,8 @@ def _add_unavailable(sub, name: str, reason: str) -> None:
 
 
 # What method "auto" did, by whether it measured the cloud as clean.
-BRANCHES = {True: "clean: implicit quadric", False: "noisy: normal-field regression"}
+BRANCHES = {True: "clean: implicit quadric",
+            False: "noisy: normal-constrained quadric or normal field"}
 
 
 def percentiles(values: np.ndarray) -> str:

@@ -6,6 +6,10 @@ neighbors' normals as a cubic polynomial of their tangent-plane positions and ta
 symmetric part of the linear coefficients as the shape operator. On a sphere or a circular
 cross-section the normal is an exactly linear function of position, so large noise-averaging
 neighborhoods add no bias there (docs/research/issue6.md has the measurements).
+
+The anchored fits of the default estimator (:func:`nfr_anchor_fits`) also fit the
+normal-constrained quadric of :mod:`curvature.fitting.normal_quadric` to the same normals and
+keep whichever model matches them better.
 """
 
 from __future__ import annotations

@@ -33,22 +33,25 @@ MIN_POINTS_NQ = 12
 RIDGE = 1e-12
 
 
+# g(x) = 2ax + b is linear in the 9 unknowns; each of its 3 components involves 4 of them:
+# component d is sum_j ROW_VALUE[d, j](x) * theta[ROW_COLS[d, j]].
+ROW_COLS = np.array([[0, 3, 4, 6], [1, 3, 5, 7], [2, 4, 5, 8]], np.int64)
+
+
 @njit(cache=True)
-def _design_rows(x0, x1, x2, rows):
-    """Rows (3, 9) of g(x) = 2ax + b as a linear function of the 9 unknowns."""
-    rows[:, :] = 0.0
-    rows[0, 0] = 2.0 * x0
-    rows[0, 3] = 2.0 * x1
-    rows[0, 4] = 2.0 * x2
-    rows[0, 6] = 1.0
-    rows[1, 1] = 2.0 * x1
-    rows[1, 3] = 2.0 * x0
-    rows[1, 5] = 2.0 * x2
-    rows[1, 7] = 1.0
-    rows[2, 2] = 2.0 * x2
-    rows[2, 4] = 2.0 * x0
-    rows[2, 5] = 2.0 * x1
-    rows[2, 8] = 1.0
+def _design_values(x0, x1, x2, vals):
+    """Nonzero entries (3, 4) of the rows of g(x), in the column order of ``ROW_COLS``."""
+    vals[0, 0] = 2.0 * x0
+    vals[0, 1] = 2.0 * x1
+    vals[0, 2] = 2.0 * x2
+    vals[1, 0] = 2.0 * x1
+    vals[1, 1] = 2.0 * x0
+    vals[1, 2] = 2.0 * x2
+    vals[2, 0] = 2.0 * x2
+    vals[2, 1] = 2.0 * x0
+    vals[2, 2] = 2.0 * x1
+    for d in range(3):
+        vals[d, 3] = 1.0
 
 
 @njit(cache=True)
@@ -123,9 +126,12 @@ def regress_normal_quadric(points, field, p, nbr, include_self, quad):
     h = np.sqrt(ss / used)
     if not h > 0.0:
         return DEGENERATE, 0.0, np.nan, np.nan
+    # |(I - nn') X theta|^2 = theta' (X'X - vv') theta with v = X'n, summed over the points;
+    # X'X is accumulated from the rows' 4 nonzeros (full matrix), vv' on the upper triangle.
+    xtx = np.zeros((N_UNKNOWNS, N_UNKNOWNS))
     mat = np.zeros((N_UNKNOWNS, N_UNKNOWNS))
     rhs = np.zeros(N_UNKNOWNS)
-    rows = np.empty((3, N_UNKNOWNS))
+    vals = np.empty((3, 4))
     v = np.empty(N_UNKNOWNS)
     for i in range(m):
         q = p if (include_self and i == 0) else nbr[i - (1 if include_self else 0)]
@@ -134,21 +140,26 @@ def regress_normal_quadric(points, field, p, nbr, include_self, quad):
             continue
         if nx * n_p[0] + ny * n_p[1] + nz * n_p[2] < 0.0:
             nx, ny, nz = -nx, -ny, -nz
-        _design_rows((points[q, 0] - px) / h, (points[q, 1] - py) / h,
-                     (points[q, 2] - pz) / h, rows)
-        # |(I - nn') X theta|^2 = theta' (X'X - vv') theta with v = X'n.
+        _design_values((points[q, 0] - px) / h, (points[q, 1] - py) / h,
+                       (points[q, 2] - pz) / h, vals)
+        v[:] = 0.0
+        for d in range(3):
+            nd = nx if d == 0 else (ny if d == 1 else nz)
+            for a in range(4):
+                ca = ROW_COLS[d, a]
+                v[ca] += nd * vals[d, a]
+                for b in range(4):
+                    xtx[ca, ROW_COLS[d, b]] += vals[d, a] * vals[d, b]
         for r in range(N_UNKNOWNS):
-            v[r] = nx * rows[0, r] + ny * rows[1, r] + nz * rows[2, r]
             rhs[r] += v[r]
-        for r in range(N_UNKNOWNS):
             for c in range(r, N_UNKNOWNS):
-                mat[r, c] += (rows[0, r] * rows[0, c] + rows[1, r] * rows[1, c]
-                              + rows[2, r] * rows[2, c] - v[r] * v[c])
+                mat[r, c] -= v[r] * v[c]
     trace = 0.0
     for r in range(N_UNKNOWNS):
-        trace += mat[r, r]
-        for c in range(r + 1, N_UNKNOWNS):
+        for c in range(r, N_UNKNOWNS):
+            mat[r, c] += xtx[r, c]
             mat[c, r] = mat[r, c]
+        trace += mat[r, r]
     for r in range(N_UNKNOWNS):
         mat[r, r] += RIDGE * trace
     low, good = cholesky(mat, 1e-13)
