@@ -34,5 +34,8 @@ lint: $(STAMP)
 bench: $(STAMP)
 	$(PY) benchmarks/speed.py
 
+openapi: $(STAMP)
+	$(PY) scripts/export_openapi.py
+
 clean:
 	rm -rf $(VENV) data .pytest_cache
