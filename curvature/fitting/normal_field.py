@@ -313,8 +313,9 @@ def nfr_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, coef, sc
     Every anchor fits both the cubic normal field (:func:`regress_normals`) and the
     normal-constrained quadric (:mod:`curvature.fitting.normal_quadric`) to the same normals,
     and keeps the field only where it fits the normals clearly better: its misfit below
-    ``nfr_ratio`` times the quadric's, and the quadric's not exact (``EXACT_MISFIT``). The quadric averages noise better and is exact on every
-    quadric surface; the field follows surfaces that are no quadric at the fit's scale.
+    ``nfr_ratio`` times the quadric's, and the quadric's not exact (``EXACT_MISFIT``). The
+    quadric averages noise better and is exact on every quadric surface; the field follows
+    surfaces that are no quadric at the fit's scale.
 
     Parameters
     ----------
