@@ -329,12 +329,12 @@ class AutoRun:
         w = r_normal
         for last in (False, True):
             t0 = time.perf_counter()
-            fits, fit_reach, size = self._fit_anchors(reps, field, kc, w)
+            fits, fit_reach = self._fit_anchors(reps, field, kc, w)
             if last:
                 for sl in self._chunks(query.shape[0]):
                     out = _OutputView(res, query[sl])
                     nfr_from_anchors(points, query[sl], owner[sl], reps, *fits, *out.arrays)
-                    out.store(size[owner[sl]])
+                    out.store(kc)
                     self._tick(sl.stop - sl.start)
             else:
                 # Refined normals of every point: the first pass's field at the point.
@@ -355,13 +355,12 @@ class AutoRun:
         used = np.unique(owner[failed])
         local = np.full(reps.shape[0], -1, np.int64)
         local[used] = np.arange(used.shape[0])
-        fits, fit_reach, size = self._fit_anchors(reps[used], field,
-                                                  min(k, self.points.shape[0] - 1),
+        fits, fit_reach = self._fit_anchors(reps[used], field, min(k, self.points.shape[0] - 1),
                                             r_normal)
         out = _OutputView(res, failed.astype(np.int64))
         nfr_from_anchors(self.points, failed.astype(np.int64), local[owner[failed]], reps[used],
                          *fits, *out.arrays)
-        out.store(size[local[owner[failed]]])
+        out.store(k)
         if self.track_reach:
             full = np.zeros(reps.shape[0])
             full[used] = fit_reach
@@ -374,9 +373,8 @@ class AutoRun:
         return d + fit_reach[owner] + np.sqrt(3.0) * self.plan.cell
 
     def _fit_anchors(self, anchors, field, k, w):
-        """Fits at ``anchors`` over up to ``k`` neighbors; also each fit's reach (the largest
-        ``distance + w[q]`` over the anchor and its k neighbors q, a bound whatever size the
-        anchor keeps) and the number of neighbors each kept."""
+        """Fits at ``anchors`` over ``k`` neighbors; also each fit's reach: the largest
+        ``distance + w[q]`` over the anchor and its neighbors q."""
         a = anchors.shape[0]
         coef = np.empty((a, 2, N_TERMS))
         scale, resid = np.empty(a), np.empty(a)
@@ -384,7 +382,6 @@ class AutoRun:
         quad, quad_scale = np.empty((a, N_QUAD)), np.empty(a)
         model = np.empty(a, np.int8)
         status = np.empty(a, np.int8)
-        size = np.empty(a, np.int64)
         reach = np.empty(a) if self.track_reach else None
         # Neighbor lists are k long: chunk by neighbor entries, not anchors, so a chunk holds
         # as many entries as a chunk of 24-neighbor queries would.
@@ -393,12 +390,12 @@ class AutoRun:
             indptr, indices, d2 = knn_csr(self.points, self.tree, anchors[sl], k)
             nfr_anchor_fits(self.points, field, anchors[sl], indptr, indices,
                             self.params["nfr_ratio"], coef[sl], scale[sl], frame[sl], quad[sl],
-                            quad_scale[sl], model[sl], resid[sl], status[sl], size[sl])
+                            quad_scale[sl], model[sl], resid[sl], status[sl])
             if reach is not None:
                 nbr = indices.reshape(-1, k)
                 reach[sl] = np.maximum((np.sqrt(d2) + w[nbr]).max(axis=1), w[anchors[sl]])
             self._tick(sl.stop - sl.start)
-        return (coef, scale, frame, quad, quad_scale, model, resid, status), reach, size
+        return (coef, scale, frame, quad, quad_scale, model, resid, status), reach
 
     def _refined_field(self, field, anchors, owner, fits):
         """First-pass normals at every point, computed in chunks (``field`` where failed)."""
@@ -438,8 +435,7 @@ class _OutputView:
         self.arrays = (np.empty(m), np.empty(m), np.empty((m, 3)), np.empty((m, 3)),
                        np.empty((m, 3)), np.empty(m), np.empty(m, np.int8))
 
-    def store(self, neighbor_count) -> None:
-        """Copy the outputs into the result's rows; ``neighbor_count`` per row or one for all."""
+    def store(self, neighbor_count: int) -> None:
         r = self.rows
         k1, k2, normals, dir1, dir2, residual, status = self.arrays
         self.res.k1[r], self.res.k2[r], self.res.residual[r], self.res.status[r] = \

@@ -40,11 +40,6 @@ MODEL_QUADRIC = 1
 # A quadric misfit below this (normals within about 1e-6 rad of the model) is an exact fit,
 # kept whatever the field's misfit (both are then round-off).
 EXACT_MISFIT = 1e-12
-# Per-anchor size (nfr_anchor_fits): the largest of k, k/2, k/4, ... whose kept model misfits
-# the normals by at most SCALE_MISFIT_RATIO times the fit over the smallest of these sizes that
-# has at least SCALE_MIN_POINTS neighbors.
-SCALE_MISFIT_RATIO = 12.0
-SCALE_MIN_POINTS = 48
 # A quadric's foot point farther than this many fit radii from the query point is rejected.
 FOOT_LIMIT = 4.0
 
@@ -310,35 +305,10 @@ def nfr_batch(points, stage1, query, indptr, indices, include_self,
         status[j] = OK
 
 
-@njit(cache=True)
-def _fit_both(points, field, p, nbr, nfr_ratio, coef, quad, frame_row):
-    """Both models around ``p`` over ``nbr``; the kept one (see :func:`nfr_anchor_fits`).
-
-    Returns
-    -------
-    model, status : int
-    h, qh : float
-        Units of the field's monomials and of the quadric's coordinates.
-    residual : float
-        The kept model's residual distance.
-    misfit : float
-        The kept model's normal misfit (NaN if it failed).
-    """
-    st, h, t1, t2, res, mis = regress_normals(points, field, p, nbr, True, coef)
-    qst, qh, qmis, qres = regress_normal_quadric(points, field, p, nbr, True, quad)
-    for d in range(3):
-        frame_row[0, d] = t1[d]
-        frame_row[1, d] = t2[d]
-        frame_row[2, d] = field[p, d]
-    if qst == OK and not (st == OK and qmis > EXACT_MISFIT and mis < nfr_ratio * qmis):
-        return MODEL_QUADRIC, OK, h, qh, qres, qmis
-    return MODEL_FIELD, st, h, qh, res, (mis if st == OK else np.nan)
-
-
 @njit(parallel=True, cache=True)
 def nfr_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, coef, scale, frame,
-                    quad, quad_scale, model, residual, status, size):
-    """Normal fits at anchor points, kept as coefficients for nearby points.
+                    quad, quad_scale, model, residual, status):
+    """Normal-field fits at anchor points, kept as coefficients for nearby points.
 
     Every anchor fits both the cubic normal field (:func:`regress_normals`) and the
     normal-constrained quadric (:mod:`curvature.fitting.normal_quadric`) to the same normals,
@@ -346,14 +316,6 @@ def nfr_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, coef, sc
     ``nfr_ratio`` times the quadric's, and the quadric's not exact (``EXACT_MISFIT``). The
     quadric averages noise better and is exact on every quadric surface; the field follows
     surfaces that are no quadric at the fit's scale.
-
-    The neighborhood size is chosen per anchor too: the first k, k/2, k/4, ... neighbors of the
-    list, the largest whose kept model's misfit is at most ``SCALE_MISFIT_RATIO`` times that of
-    the smallest size of at least ``SCALE_MIN_POINTS`` neighbors (48 for k = 384), else that
-    smallest size. A neighborhood that reaches around a small feature (the far side of a thin
-    tube, over a small end) fits the normals tens to hundreds of times worse than a small one,
-    while on surfaces the models follow the misfit grows only 2 to 6 times from 48 to 384
-    neighbors, with the noise (docs/accuracy.md section 8).
 
     Parameters
     ----------
@@ -363,11 +325,10 @@ def nfr_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, coef, sc
     anchors : ndarray, shape (a,), int64
         Anchor point indices.
     indptr, indices : ndarray
-        CSR neighborhoods of the anchors, each sorted by distance (anchor not listed; it takes
-        part in its fit).
+        CSR neighborhoods of the anchors (anchor not listed; it takes part in its fit).
     nfr_ratio : float
-        Misfit ratio below which the cubic field is kept (0: always the quadric, unless it
-        fails; inf: always the field, unless the quadric is exact).
+        Misfit ratio below which the cubic field is kept (0: always the quadric; inf: always
+        the field).
     coef : ndarray, shape (a, 2, N_TERMS)
     scale : ndarray, shape (a,)
     frame : ndarray, shape (a, 3, 3)
@@ -381,49 +342,26 @@ def nfr_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, coef, sc
         Output: the kept model's residual distance.
     status : ndarray, shape (a,), int8
         Output status of each anchor's fit.
-    size : ndarray, shape (a,), int64
-        Output: neighbors of the kept fit (not counting the anchor).
     """
     for j in prange(anchors.shape[0]):
         p = anchors[j]
         nbr = indices[indptr[j]:indptr[j + 1]]
-        k = nbr.shape[0]
-        # Sizes k, k/2, k/4, ... down to the smallest of at least SCALE_MIN_POINTS neighbors.
-        small = k
-        while small // 2 >= SCALE_MIN_POINTS:
-            small //= 2
-        if small == k:
-            m, st, h, qh, res, _ = _fit_both(points, field, p, nbr, nfr_ratio, coef[j], quad[j],
-                                             frame[j])
-            model[j], status[j], scale[j], quad_scale[j], residual[j], size[j] = \
-                m, st, h, qh, res, k
-            continue
-        # The smallest size first, into scratch: it is the reference (and the fallback).
-        coef_s = np.empty((2, N_TERMS))
-        quad_s = np.empty(quad.shape[1])
-        frame_s = np.empty((3, 3))
-        m_s, st_s, h_s, qh_s, res_s, mis_s = _fit_both(points, field, p, nbr[:small], nfr_ratio,
-                                                       coef_s, quad_s, frame_s)
-        limit = max(SCALE_MISFIT_RATIO * mis_s if st_s == OK else np.inf, EXACT_MISFIT)
-        model[j], status[j], scale[j], quad_scale[j], residual[j], size[j] = \
-            m_s, st_s, h_s, qh_s, res_s, small
-        coef[j] = coef_s
-        quad[j] = quad_s
-        frame[j] = frame_s
-        # Grow while the fit still matches the normals: a size that fails stops the growth, so
-        # a large neighborhood is never taken past a smaller one that reached around a feature.
-        kk = small
-        while st_s == OK and kk < k:
-            kk = min(2 * kk, k)
-            m, st, h, qh, res, mis = _fit_both(points, field, p, nbr[:kk], nfr_ratio, coef_s,
-                                               quad_s, frame_s)
-            if not (st == OK and mis <= limit):
-                break
-            model[j], status[j], scale[j], quad_scale[j], residual[j], size[j] = \
-                m, st, h, qh, res, kk
-            coef[j] = coef_s
-            quad[j] = quad_s
-            frame[j] = frame_s
+        st, h, t1, t2, res, mis = regress_normals(points, field, p, nbr, True, coef[j])
+        qst, qh, qmis, qres = regress_normal_quadric(points, field, p, nbr, True, quad[j])
+        scale[j] = h
+        quad_scale[j] = qh
+        for d in range(3):
+            frame[j, 0, d] = t1[d]
+            frame[j, 1, d] = t2[d]
+            frame[j, 2, d] = field[p, d]
+        if qst == OK and not (st == OK and qmis > EXACT_MISFIT and mis < nfr_ratio * qmis):
+            model[j] = MODEL_QUADRIC
+            status[j] = OK
+            residual[j] = qres
+        else:
+            model[j] = MODEL_FIELD
+            status[j] = st
+            residual[j] = res
 
 
 @njit(parallel=True, cache=True)

@@ -59,9 +59,8 @@ def test_noisy_shapes_meet_half_of_apss(shape, kwargs, limit):
     assert res.info["fit"] == "nfr" and not res.info["plan"]["clean"]
     e1, e2 = mean_errors(cloud, res)
     assert e1 <= limit[0] and e2 <= limit[1], (e1, e2)
-    # both passes fit up to k = 384 neighbors around each cell's anchor, most of them all 384
-    assert set(np.unique(res.neighbor_count)) <= {48, 96, 192, 384}
-    assert np.mean(res.neighbor_count == 384) > 0.6
+    # both passes fit k = 384 neighbors around each cell's anchor
+    assert np.all(res.neighbor_count == 384)
 
 
 @pytest.mark.parametrize("shape, kwargs, forced", [
@@ -74,20 +73,6 @@ def test_choosing_the_model_per_anchor_beats_either_model_alone(shape, kwargs, f
     alone = mean_errors(cloud, curvature.estimate(cloud.points, normals=cloud.normals,
                                                   nfr_ratio=forced))
     assert chosen[0] < 0.6 * alone[0], (chosen, alone)
-
-
-def test_neighborhoods_shrink_where_they_would_reach_around_a_thin_tube():
-    # 2,000 points on the torus: 384 neighbors span more than its tube (radius 1); the misfit
-    # rule keeps 96-192 there (k1 error 0.33 with 384 everywhere, measured)
-    cloud = synthetic.torus(2000, noise=0.1, seed=1)
-    res = curvature.estimate(cloud.points, normals=cloud.normals)
-    e1, e2 = mean_errors(cloud, res)
-    assert e1 < 0.05 and e2 < 0.05, (e1, e2)
-    assert np.mean(res.neighbor_count <= 192) > 0.9
-    # on a 10,000-point torus the same rule keeps 192-384 (measured mean 281)
-    big = synthetic.torus(10_000, noise=0.1, seed=1)
-    counts = curvature.estimate(big.points).neighbor_count
-    assert np.mean(counts >= 192) > 0.99 and counts.mean() > 250
 
 
 def test_noisy_beats_the_paper_preset_by_far():
