@@ -40,8 +40,12 @@ from .status import Status
 
 AUTO_PARAMS = (
     ParamSpec("k", int, 384, 48, 1024,
-              help="neighbors of the normal fits on noisy clouds (both passes)"),
+              help="neighbors of the normal fits on noisy clouds, both passes (lowered on small "
+                   "clouds: max_share)"),
     ParamSpec("normal_k", int, 48, 12, 256, help="neighbors of the stage-1 PCA normals"),
+    ParamSpec("max_share", float, 0.04, 0.0, 1.0,
+              help="largest share of the cloud's points one fit may use: on clouds of fewer "
+                   "than k / max_share points, k is lowered to max(48, max_share * points)"),
     ParamSpec("nfr_ratio", float, 0.7, 0.0, 1e6,
               help="the cubic normal field replaces the normal-constrained quadric at an anchor "
                    "where its normal misfit is below this fraction of the quadric's (0: quadric "
@@ -56,6 +60,8 @@ PLAN_K = 24
 PLAN_CELLS = 64
 # Anchor grid cell, in spacings (about 13 points a cell on a surface).
 ANCHOR_CELL = 1.5
+# Fewest neighbors max_share lowers k to.
+SHARE_MIN_K = 48
 
 
 @dataclass(frozen=True)
@@ -74,6 +80,8 @@ class AutoPlan:
         Corner of the anchor grid (the cloud's bounding-box minimum).
     cell : float
         Anchor grid cell size.
+    points : int
+        Points of the whole cloud (``max_share`` is a share of them).
     """
 
     spacing: float
@@ -81,6 +89,7 @@ class AutoPlan:
     clean: bool
     origin: tuple
     cell: float
+    points: int
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -225,7 +234,8 @@ def plan_auto(points: np.ndarray, tree: tuple, noise_threshold: float) -> AutoPl
     if not spacing > 0.0:  # every point coincides with its 24 nearest: any cell works
         spacing = coarse_cell(points, PLAN_CELLS)
     return AutoPlan(spacing=spacing, noise=noise, clean=bool(noise < noise_threshold),
-                    origin=tuple(float(v) for v in origin), cell=ANCHOR_CELL * spacing)
+                    origin=tuple(float(v) for v in origin), cell=ANCHOR_CELL * spacing,
+                    points=int(points.shape[0]))
 
 
 class AutoRun:
@@ -266,7 +276,7 @@ class AutoRun:
         """Fill every output array of ``res`` and the orientation graph (n, orient_k)."""
         n = self.points.shape[0]
         k_stage1 = min(max(self.params["normal_k"], PLAN_K, orient_k), n - 1)
-        kc = min(self.params["k"], n - 1)
+        kc = min(self.fit_k(), n - 1)
         reps, owner = grid_cells(self.points, np.asarray(self.plan.origin), self.plan.cell)
         anchors_total = 0 if self.plan.clean else 2 * reps.shape[0]
         self._total = 2 * n + anchors_total
@@ -282,6 +292,13 @@ class AutoRun:
                 self._fallback(res, field, radius[0], reps, owner, max(kc // 2, 12), failed)
             return
         self._anchored(res, field, radius[0], reps, owner, kc)
+
+    def fit_k(self) -> int:
+        """Neighbors of the noisy branch's fits: ``k``, lowered on small clouds so that one fit
+        never covers more than ``max_share`` of the cloud (there 384 neighbors would reach
+        around whole features, e.g. across a thin torus's tube; docs/accuracy.md section 8)."""
+        share = int(self.params["max_share"] * self.plan.points)
+        return min(self.params["k"], max(SHARE_MIN_K, share))
 
     def _tick(self, count: int) -> None:
         self._done += count
