@@ -33,8 +33,8 @@ MIN_POINTS_NQ = 12
 RIDGE = 1e-12
 
 
-# g(x) = 2ax + b is linear in the 9 unknowns; each of its 3 components involves 4 of them:
-# component d is sum_j ROW_VALUE[d, j](x) * theta[ROW_COLS[d, j]].
+# g(x) = 2ax + b is linear in the 9 unknowns theta; each of its 3 components involves 4 of
+# them: g_d = sum_j vals[d, j] * theta[ROW_COLS[d, j]], vals from _design_values(x).
 ROW_COLS = np.array([[0, 3, 4, 6], [1, 3, 5, 7], [2, 4, 5, 8]], np.int64)
 
 
