@@ -108,8 +108,9 @@ def _method_model(name: str, finder: type) -> type[BaseModel]:
 
 
 AUTO_DESCRIPTION = ("Measures the cloud's noise and spacing and picks model and scale itself: "
-                    "the implicit quadric on clean clouds, normal-field regression over large "
-                    "neighborhoods on noisy ones.")
+                    "the implicit quadric on clean clouds; on noisy ones, fits of the estimated "
+                    "normals over large neighborhoods (a quadric whose gradient follows them, or "
+                    "a cubic normal field where that fits them clearly better).")
 
 
 def _auto_model() -> type[BaseModel]:
