@@ -112,20 +112,30 @@ def regress_normal_quadric(points, field, p, nbr, include_self, quad):
         return TOO_FEW, 0.0, np.nan, np.nan
     if not np.all(np.isfinite(n_p)):
         return DEGENERATE, 0.0, np.nan, np.nan
-    px, py, pz = points[p, 0], points[p, 1], points[p, 2]
-    ss = 0.0
+    # Offsets from p and normals flipped to agree with p's, of the points with a known normal.
+    xs = np.empty((m, 3))
+    ns = np.empty((m, 3))
     used = 0
+    ss = 0.0
     for i in range(m):
         q = p if (include_self and i == 0) else nbr[i - (1 if include_self else 0)]
-        if np.isfinite(field[q, 0]) and np.isfinite(field[q, 1]) and np.isfinite(field[q, 2]):
-            ss += ((points[q, 0] - px) ** 2 + (points[q, 1] - py) ** 2
-                   + (points[q, 2] - pz) ** 2)
-            used += 1
+        nx, ny, nz = field[q, 0], field[q, 1], field[q, 2]
+        if not (np.isfinite(nx) and np.isfinite(ny) and np.isfinite(nz)):
+            continue
+        s = 1.0 if nx * n_p[0] + ny * n_p[1] + nz * n_p[2] >= 0.0 else -1.0
+        for d in range(3):
+            xs[used, d] = points[q, d] - points[p, d]
+            ss += xs[used, d] * xs[used, d]
+        ns[used, 0] = s * nx
+        ns[used, 1] = s * ny
+        ns[used, 2] = s * nz
+        used += 1
     if used < MIN_POINTS_NQ:
         return TOO_FEW, 0.0, np.nan, np.nan
     h = np.sqrt(ss / used)
     if not h > 0.0:
         return DEGENERATE, 0.0, np.nan, np.nan
+    xs = xs[:used] / h
     # |(I - nn') X theta|^2 = theta' (X'X - vv') theta with v = X'n, summed over the points;
     # X'X is accumulated from the rows' 4 nonzeros (full matrix), vv' on the upper triangle.
     xtx = np.zeros((N_UNKNOWNS, N_UNKNOWNS))
@@ -133,21 +143,13 @@ def regress_normal_quadric(points, field, p, nbr, include_self, quad):
     rhs = np.zeros(N_UNKNOWNS)
     vals = np.empty((3, 4))
     v = np.empty(N_UNKNOWNS)
-    for i in range(m):
-        q = p if (include_self and i == 0) else nbr[i - (1 if include_self else 0)]
-        nx, ny, nz = field[q, 0], field[q, 1], field[q, 2]
-        if not (np.isfinite(nx) and np.isfinite(ny) and np.isfinite(nz)):
-            continue
-        if nx * n_p[0] + ny * n_p[1] + nz * n_p[2] < 0.0:
-            nx, ny, nz = -nx, -ny, -nz
-        _design_values((points[q, 0] - px) / h, (points[q, 1] - py) / h,
-                       (points[q, 2] - pz) / h, vals)
+    for i in range(used):
+        _design_values(xs[i, 0], xs[i, 1], xs[i, 2], vals)
         v[:] = 0.0
         for d in range(3):
-            nd = nx if d == 0 else (ny if d == 1 else nz)
             for a in range(4):
                 ca = ROW_COLS[d, a]
-                v[ca] += nd * vals[d, a]
+                v[ca] += ns[i, d] * vals[d, a]
                 for b in range(4):
                     xtx[ca, ROW_COLS[d, b]] += vals[d, a] * vals[d, b]
         for r in range(N_UNKNOWNS):
@@ -173,40 +175,25 @@ def regress_normal_quadric(points, field, p, nbr, include_self, quad):
         return DEGENERATE, h, np.nan, np.nan
     for r in range(N_UNKNOWNS):
         quad[r] = z[r] * used / norm
-    # Offset through the points and the two residuals, in a second pass.
+    # One pass for the offset and both residuals: with w = 1 / |g|^2, the offset is
+    # c = -sum(w f) / sum(w), and sum w (f + c)^2 = sum(w f^2) + c sum(w f).
     sw = 0.0
     swf = 0.0
+    swff = 0.0
     sin2 = 0.0
-    for i in range(m):
-        q = p if (include_self and i == 0) else nbr[i - (1 if include_self else 0)]
-        nx, ny, nz = field[q, 0], field[q, 1], field[q, 2]
-        if not (np.isfinite(nx) and np.isfinite(ny) and np.isfinite(nz)):
-            continue
-        x0 = (points[q, 0] - px) / h
-        x1 = (points[q, 1] - py) / h
-        x2 = (points[q, 2] - pz) / h
-        g0, g1, g2 = _gradient(quad, x0, x1, x2)
+    for i in range(used):
+        g0, g1, g2 = _gradient(quad, xs[i, 0], xs[i, 1], xs[i, 2])
         gg = g0 * g0 + g1 * g1 + g2 * g2
         if not gg > 0.0:
             return DEGENERATE, h, np.nan, np.nan
-        f = _value(quad, x0, x1, x2)
+        f = _value(quad, xs[i, 0], xs[i, 1], xs[i, 2])
         sw += 1.0 / gg
         swf += f / gg
-        dot = nx * g0 + ny * g1 + nz * g2
+        swff += f * f / gg
+        dot = ns[i, 0] * g0 + ns[i, 1] * g1 + ns[i, 2] * g2
         sin2 += max(1.0 - dot * dot / gg, 0.0)
     quad[9] = -swf / sw
-    dist2 = 0.0
-    for i in range(m):
-        q = p if (include_self and i == 0) else nbr[i - (1 if include_self else 0)]
-        if not (np.isfinite(field[q, 0]) and np.isfinite(field[q, 1])
-                and np.isfinite(field[q, 2])):
-            continue
-        x0 = (points[q, 0] - px) / h
-        x1 = (points[q, 1] - py) / h
-        x2 = (points[q, 2] - pz) / h
-        g0, g1, g2 = _gradient(quad, x0, x1, x2)
-        f = _value(quad, x0, x1, x2) + quad[9]
-        dist2 += f * f / (g0 * g0 + g1 * g1 + g2 * g2)
+    dist2 = max(swff + quad[9] * swf, 0.0)
     return OK, h, sin2 / used, h * np.sqrt(dist2 / used)
 
 
