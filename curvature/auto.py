@@ -35,6 +35,8 @@ from numba import njit
 from .fitting.kernels import FIT_IMPLICIT, FIT_MONGE, SOLVER_TAUBIN, fit_batch
 from .fitting.normal_field import N_TERMS, nfr_anchor_fits, nfr_from_anchors, pca_normals
 from .fitting.normal_quadric import N_QUAD
+from .fitting import scale_selection
+from .fitting.scale_selection import KIND_MONGE, multiscale_anchor_fits
 from .neighborhoods.kdtree import build_tree, knn_parallel
 from .params import ParamSpec
 from .status import Status
@@ -51,6 +53,10 @@ AUTO_PARAMS = (
               help="the cubic normal field replaces the normal-constrained quadric at an anchor "
                    "where its normal misfit is below this fraction of the quadric's (0: quadric "
                    "everywhere; large: field everywhere)"),
+    ParamSpec("scale_gamma", float, 5.0, 0.0, 100.0,
+              help="per-anchor neighborhood size on noisy clouds: of the fits over 24, 48, 96, "
+                   "192 and k neighbors, the least noisy whose curvature agrees with every "
+                   "noisier one within this many standard errors (0: every anchor uses k)"),
     ParamSpec("noise_threshold", float, 0.01, 0.0, 1.0,
               help="relative noise (RMS residual / spacing) below which a cloud counts as clean "
                    "and gets the implicit quadric over 24 neighbors"),
@@ -347,12 +353,14 @@ class AutoRun:
         w = r_normal
         for last in (False, True):
             t0 = time.perf_counter()
-            fits, fit_reach = self._fit_anchors(reps, field, kc, w)
+            # Pass 1 only refines normals: Monge rungs would tilt them by their noisy curvature
+            # over a cell's width, so its ladder has the normal-fit rungs only.
+            fits, fit_reach, chosen = self._fit_anchors(reps, field, kc, w, positional=last)
             if last:
                 for sl in self._chunks(query.shape[0]):
                     out = _OutputView(res, query[sl])
                     nfr_from_anchors(points, query[sl], owner[sl], reps, *fits, *out.arrays)
-                    out.store(kc)
+                    out.store(chosen[owner[sl]])
                     self._tick(sl.stop - sl.start)
             else:
                 # Refined normals of every point: the first pass's field at the point.
@@ -373,12 +381,12 @@ class AutoRun:
         used = np.unique(owner[failed])
         local = np.full(reps.shape[0], -1, np.int64)
         local[used] = np.arange(used.shape[0])
-        fits, fit_reach = self._fit_anchors(reps[used], field, min(k, self.points.shape[0] - 1),
-                                            r_normal)
+        fits, fit_reach, chosen = self._fit_anchors(
+            reps[used], field, min(k, self.points.shape[0] - 1), r_normal)
         out = _OutputView(res, failed.astype(np.int64))
         nfr_from_anchors(self.points, failed.astype(np.int64), local[owner[failed]], reps[used],
                          *fits, *out.arrays)
-        out.store(k)
+        out.store(chosen[local[owner[failed]]])
         if self.track_reach:
             full = np.zeros(reps.shape[0])
             full[used] = fit_reach
@@ -390,9 +398,21 @@ class AutoRun:
         d = np.linalg.norm(self.points - self.points[reps[owner]], axis=1)
         return d + fit_reach[owner] + np.sqrt(3.0) * self.plan.cell
 
-    def _fit_anchors(self, anchors, field, k, w):
-        """Fits at ``anchors`` over ``k`` neighbors; also each fit's reach: the largest
-        ``distance + w[q]`` over the anchor and its neighbors q."""
+    def _fit_anchors(self, anchors, field, k, w, positional: bool = True):
+        """Fits at ``anchors`` over up to ``k`` neighbors, the size chosen per anchor
+        (:mod:`curvature.fitting.scale_selection`; every anchor uses ``k`` when
+        ``scale_gamma`` is 0). ``positional`` includes the Monge rungs of the ladder.
+
+        Returns
+        -------
+        fits : tuple
+            The arrays :func:`~curvature.fitting.normal_field.nfr_from_anchors` reads.
+        reach : ndarray, shape (a,), or None
+            With ``track_reach``: the largest ``distance + w[q]`` over the anchor and its
+            ``k`` neighbors q (the chosen fit uses a subset of them).
+        chosen : ndarray, shape (a,), int64
+            Points of each anchor's kept fit (anchor included).
+        """
         a = anchors.shape[0]
         coef = np.empty((a, 2, N_TERMS))
         scale, resid = np.empty(a), np.empty(a)
@@ -401,19 +421,33 @@ class AutoRun:
         model = np.empty(a, np.int8)
         status = np.empty(a, np.int8)
         reach = np.empty(a) if self.track_reach else None
+        chosen = np.full(a, k + 1, np.int64)
+        sigma = np.empty(a)
+        gamma = self.params["scale_gamma"]
+        kinds = np.asarray(scale_selection.DEFAULT_KINDS, np.int64)
+        rungs = np.flatnonzero((kinds != KIND_MONGE) | positional)
+        ladder = np.asarray(scale_selection.DEFAULT_LADDER, np.int64)[rungs]
+        calib = np.asarray(scale_selection.CALIBRATION, np.float64)[np.append(rungs, len(kinds))]
+        kinds = kinds[rungs]
         # Neighbor lists are k long: chunk by neighbor entries, not anchors, so a chunk holds
         # as many entries as a chunk of 24-neighbor queries would.
         step = max(64, self.chunk_size * 24 // max(k, 24))
         for sl in (slice(i, min(i + step, a)) for i in range(0, a, step)):
             indptr, indices, d2 = knn_csr(self.points, self.tree, anchors[sl], k)
-            nfr_anchor_fits(self.points, field, anchors[sl], indptr, indices,
-                            self.params["nfr_ratio"], coef[sl], scale[sl], frame[sl], quad[sl],
-                            quad_scale[sl], model[sl], resid[sl], status[sl])
+            arrays = (coef[sl], scale[sl], frame[sl], quad[sl], quad_scale[sl], model[sl],
+                      resid[sl], status[sl])
+            if gamma > 0.0:
+                multiscale_anchor_fits(self.points, field, anchors[sl], indptr, indices,
+                                       self.params["nfr_ratio"], ladder, kinds, gamma, calib,
+                                       *arrays, chosen[sl], sigma[sl])
+            else:
+                nfr_anchor_fits(self.points, field, anchors[sl], indptr, indices,
+                                self.params["nfr_ratio"], *arrays)
             if reach is not None:
                 nbr = indices.reshape(-1, k)
                 reach[sl] = np.maximum((np.sqrt(d2) + w[nbr]).max(axis=1), w[anchors[sl]])
             self._tick(sl.stop - sl.start)
-        return (coef, scale, frame, quad, quad_scale, model, resid, status), reach
+        return (coef, scale, frame, quad, quad_scale, model, resid, status), reach, chosen
 
     def _refined_field(self, field, anchors, owner, fits):
         """First-pass normals at every point, computed in chunks (``field`` where failed)."""

@@ -42,6 +42,17 @@ MODEL_QUADRIC = 1
 EXACT_MISFIT = 1e-12
 # A quadric's foot point farther than this many fit radii from the query point is rejected.
 FOOT_LIMIT = 4.0
+# Largest |k| * h a fit may report, h the RMS distance of its points from its centre: a
+# curvature radius below half the spread of the points fitted is not something those points
+# show (a sampled patch does not fold over within itself); it is what an implicit model does
+# next to a feature it cannot follow (flat faces beside a fillet read 1e2 to 1e5 otherwise).
+SUPPORT = 2.0
+
+
+@njit(cache=True)
+def supported(c1, c2, h):
+    """Whether curvatures ``c1, c2`` of a fit of RMS radius ``h`` are within :data:`SUPPORT`."""
+    return max(abs(c1), abs(c2)) * h <= SUPPORT
 
 
 @njit(parallel=True, cache=True)
@@ -344,24 +355,55 @@ def nfr_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, coef, sc
         Output status of each anchor's fit.
     """
     for j in prange(anchors.shape[0]):
-        p = anchors[j]
-        nbr = indices[indptr[j]:indptr[j + 1]]
-        st, h, t1, t2, res, mis = regress_normals(points, field, p, nbr, True, coef[j])
-        qst, qh, qmis, qres = regress_normal_quadric(points, field, p, nbr, True, quad[j])
-        scale[j] = h
-        quad_scale[j] = qh
-        for d in range(3):
-            frame[j, 0, d] = t1[d]
-            frame[j, 1, d] = t2[d]
-            frame[j, 2, d] = field[p, d]
-        if qst == OK and not (st == OK and qmis > EXACT_MISFIT and mis < nfr_ratio * qmis):
-            model[j] = MODEL_QUADRIC
-            status[j] = OK
-            residual[j] = qres
-        else:
-            model[j] = MODEL_FIELD
-            status[j] = st
-            residual[j] = res
+        nfr_anchor_fits_one(points, field, anchors[j], indices[indptr[j]:indptr[j + 1]],
+                            nfr_ratio, coef[j], quad[j], frame[j], j, scale, quad_scale, model,
+                            residual, status)
+
+
+@njit(cache=True)
+def nfr_anchor_fits_one(points, field, p, nbr, nfr_ratio, coef_j, quad_j, frame_j, j, scale,
+                        quad_scale, model, residual, status):
+    """One anchor of :func:`nfr_anchor_fits` (row ``j`` of its outputs); also returns the
+    kept model's curvature at the anchor, for the scale selection of
+    :mod:`curvature.fitting.scale_selection`.
+
+    Returns
+    -------
+    k1, k2 : float
+        The kept model's principal curvatures at the anchor (NaN when not OK).
+    distance : float
+        The kept model's RMS distance of the fitted points to its surface.
+    radius : float
+        RMS distance of the fitted points from the anchor.
+    """
+    st, h, t1, t2, res, mis = regress_normals(points, field, p, nbr, True, coef_j)
+    qst, qh, qmis, qres = regress_normal_quadric(points, field, p, nbr, True, quad_j)
+    scale[j] = h
+    quad_scale[j] = qh
+    for d in range(3):
+        frame_j[0, d] = t1[d]
+        frame_j[1, d] = t2[d]
+        frame_j[2, d] = field[p, d]
+    if qst == OK and not (st == OK and qmis > EXACT_MISFIT and mis < nfr_ratio * qmis):
+        model[j] = MODEL_QUADRIC
+        status[j] = OK
+        residual[j] = qres
+        fst, c1, c2, _, _, _ = curvature_from_quadric(quad_j, qh, np.zeros(3), FOOT_LIMIT)
+        if fst != OK:
+            return np.nan, np.nan, qres, qh
+        return c1, c2, qres, qh
+    model[j] = MODEL_FIELD
+    status[j] = st
+    residual[j] = res
+    if st != OK:
+        return np.nan, np.nan, res, qh
+    # Scratch outputs of one row: curvature_from_field writes into result arrays.
+    k1o, k2o = np.empty(1), np.empty(1)
+    vecs = np.empty((3, 1, 3))
+    if not curvature_from_field(coef_j, h, field[p], t1, t2, 0.0, 0.0, 0, k1o, k2o, vecs[0],
+                                vecs[1], vecs[2]):
+        return np.nan, np.nan, res, qh
+    return k1o[0], k2o[0], res, qh
 
 
 @njit(parallel=True, cache=True)
@@ -400,8 +442,12 @@ def nfr_from_anchors(points, query, owner, anchors, coef, scale, frame, quad, qu
             hq = quad_scale[a]
             st, c1, c2, nn, d1, d2 = curvature_from_quadric(
                 quad[a], hq, np.array([dx / hq, dy / hq, dz / hq]), FOOT_LIMIT)
-            if st != OK:
-                status[j] = st
+            if st != OK or not supported(c1, c2, hq):
+                # Read the model at its anchor instead: scale selection admitted it there.
+                st, c1, c2, nn, d1, d2 = curvature_from_quadric(quad[a], hq, np.zeros(3),
+                                                                FOOT_LIMIT)
+            if st != OK or not supported(c1, c2, hq):
+                status[j] = DEGENERATE if st == OK else st
                 continue
             if not store_outputs(j, c1, c2, nn, d1, d2, k1, k2, normals, dir1, dir2):
                 clear_outputs(j, k1, k2, residual, normals, dir1, dir2)
@@ -412,8 +458,16 @@ def nfr_from_anchors(points, query, owner, anchors, coef, scale, frame, quad, qu
             t2 = frame[a, 1]
             u1 = dx * t1[0] + dy * t1[1] + dz * t1[2]
             u2 = dx * t2[0] + dy * t2[1] + dz * t2[2]
-            if not curvature_from_field(coef[a], scale[a], frame[a, 2], t1, t2, u1, u2, j,
-                                        k1, k2, normals, dir1, dir2):
+            ok = curvature_from_field(coef[a], scale[a], frame[a, 2], t1, t2, u1, u2, j,
+                                      k1, k2, normals, dir1, dir2)
+            if not (ok and supported(k1[j], k2[j], scale[a])):
+                ok = curvature_from_field(coef[a], scale[a], frame[a, 2], t1, t2, 0.0, 0.0, j,
+                                          k1, k2, normals, dir1, dir2)
+                if ok and not supported(k1[j], k2[j], scale[a]):
+                    clear_outputs(j, k1, k2, residual, normals, dir1, dir2)
+                    status[j] = DEGENERATE
+                    continue
+            if not ok:
                 clear_outputs(j, k1, k2, residual, normals, dir1, dir2)
                 status[j] = NON_FINITE
                 continue

@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from .errors import ParameterError
+from ..errors import ParameterError
 
 __all__ = [
     "BEZIER_DEFAULT_HEIGHTS",
@@ -43,19 +43,26 @@ __all__ = [
     "SyntheticCloud",
     "bezier_control_net",
     "bezier_patch",
+    "blade",
     "cylinder",
     "ellipsoid",
+    "filleted_box",
+    "filleted_cylinder",
     "main",
     "make",
     "plane",
     "saddle",
     "sphere",
     "surface_geometry",
+    "thin_plate",
     "torus",
 ]
 
 SAMPLINGS = ("area", "parameter")
-NOISE_MODELS = ("axis", "direction")
+NOISE_MODELS = ("axis", "direction", "view")
+#: Direction of the ``"view"`` noise model: a scanner's range noise acts along its line of sight,
+#: here one fixed direction (an orthographic scanner looking down and sideways).
+VIEW_DIRECTION = (0.36, -0.48, -0.8)
 
 #: Heights z_ij of the default bicubic Bezier control net. Control point P_ij = (i, j, z_ij)
 #: for i, j = 0..3 (i runs along x, j along y), so the net spans [0, 3] x [0, 3] in x, y.
@@ -112,12 +119,21 @@ class SyntheticCloud:
     noise : float
         Noise level in percent of the BBD of ``clean``.
     noise_model : str
-        ``"axis"`` (independent N(0, s^2) on x, y and z) or ``"direction"`` (a random unit
-        direction times one N(0, s^2) length).
+        ``"axis"`` (independent N(0, s^2) on x, y and z), ``"direction"`` (a random unit
+        direction times one N(0, s^2) length) or ``"view"`` (one N(0, s^2) length along the
+        fixed :data:`VIEW_DIRECTION`, like a scanner's range noise).
     noise_sigma : float
         The absolute standard deviation ``s = noise / 100 * BBD(clean)``.
     seed : int or None
         Seed passed to :func:`numpy.random.default_rng`.
+    region : ndarray, shape (n,), int8, or None
+        Part shapes (:mod:`curvature.synthetic.parts`): index into ``region_names`` of every
+        point's region (face, fillet, corner, edge zone, outlier ...); None for smooth shapes.
+    region_names : tuple of str
+        Names of the region codes.
+    feature_distance : ndarray, shape (n,), or None
+        Part shapes: geodesic distance of each clean point to the nearest line where the exact
+        curvature jumps (a face meeting a fillet); inf where there is none.
     """
 
     points: np.ndarray
@@ -135,6 +151,15 @@ class SyntheticCloud:
     noise_model: str = "axis"
     noise_sigma: float = 0.0
     seed: int | None = 0
+    region: np.ndarray | None = None
+    region_names: tuple = ()
+    feature_distance: np.ndarray | None = None
+
+    def region_mask(self, name: str) -> np.ndarray:
+        """Points of region ``name``, shape (n,) bool (all False for an unknown name)."""
+        if self.region is None or name not in self.region_names:
+            return np.zeros(len(self), bool)
+        return self.region == self.region_names.index(name)
 
     def __len__(self) -> int:
         return int(self.points.shape[0])
@@ -156,7 +181,7 @@ class SyntheticCloud:
 
     def to_point_cloud(self):
         """Return a :class:`curvature.PointCloud` with the (noisy) points and exact normals."""
-        from .cloud import PointCloud
+        from ..cloud import PointCloud
 
         return PointCloud(points=self.points, normals=self.normals)
 
@@ -344,6 +369,9 @@ def _add_noise(rng, clean, noise, noise_model):
     n = clean.shape[0]
     if noise_model == "axis":
         disp = rng.normal(0.0, sigma, size=(n, 3))
+    elif noise_model == "view":
+        view = np.asarray(VIEW_DIRECTION) / np.linalg.norm(VIEW_DIRECTION)
+        disp = rng.normal(0.0, sigma, size=n)[:, None] * view
     else:
         d = rng.normal(size=(n, 3))
         norm = np.linalg.norm(d, axis=1)
@@ -837,6 +865,14 @@ SHAPES: dict[str, Callable[..., SyntheticCloud]] = {
 }
 
 
+# Part shapes live in their own module, which needs the helpers above.
+from .parts import PART_SHAPES  # noqa: E402
+
+SHAPES.update(PART_SHAPES)
+blade, filleted_box, filleted_cylinder, thin_plate = (
+    PART_SHAPES[k] for k in ("blade", "filleted_box", "filleted_cylinder", "thin_plate"))
+
+
 def make(name, n=10000, **kwargs):
     """Sample the shape called ``name`` (a key of :data:`SHAPES`).
 
@@ -885,14 +921,16 @@ def main(argv=None) -> int:
     parser.add_argument("--noise-model", choices=NOISE_MODELS, default="axis",
                         help="per-axis Gaussian, or random direction times Gaussian (axis)")
     parser.add_argument("--sampling", choices=SAMPLINGS, default="area",
-                        help="area-uniform or parameter-uniform sampling (area)")
+                        help="area-uniform or parameter-uniform sampling (area; part shapes "
+                             "are always area-uniform)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (0)")
     parser.add_argument("-o", "--output", required=True,
                         help="output file (.ply, .csv, .npz, ...; .npy saves the points only)")
     args = parser.parse_args(argv)
     try:
+        options = {} if args.shape in PART_SHAPES else {"sampling": args.sampling}
         cloud = make(args.shape, args.n, noise=args.noise, noise_model=args.noise_model,
-                     sampling=args.sampling, seed=args.seed)
+                     seed=args.seed, **options)
         if str(args.output).lower().endswith(".npy"):
             np.save(args.output, cloud.points)
         else:

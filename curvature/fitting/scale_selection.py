@@ -1,0 +1,235 @@
+"""Per-anchor neighborhood size: the largest fit that still agrees with the smaller ones.
+
+A fixed neighborhood size trades bias against noise once for the whole cloud: large fits
+average noise away on flat faces but blur fillets, corners and leading edges and reach across
+thin walls; small fits follow features but are noisy. Here every anchor fits the
+normal-constrained quadric (:mod:`curvature.fitting.normal_quadric`) (or a Monge quadric) on nested
+prefixes of its sorted neighbor list (the ``ladder``, e.g. 24, 48, 96, 192 neighbors) beside the full-size fit of
+:func:`~curvature.fitting.normal_field.nfr_anchor_fits`, and keeps one of them by the
+intersection of confidence intervals rule (ICI; Goldenshluger & Nemirovski, Math. Methods
+Statist. 6 (1997); Katkovnik, Signal Processing 1999):
+
+* the small rungs are positional Monge fits (a quadratic height function over the anchor's
+  PCA plane): the stage-1 normals are PCA normals over 48 neighbors, smoothed across any
+  feature narrower than that, so a fit to them cannot be sharper than they are (on a fillet of
+  6.5 spacings the normal fits read 3.4 for 5 at any size, Monge over 24 points 5.15); the
+  larger rungs fit the normal-constrained quadric, which averages noise better;
+* every scale s gives principal curvatures k1_s, k2_s at the anchor and a standard error
+  ``sigma_s = calib_s * d_s / (h_s**2 * sqrt(s))``, with d_s the fit's RMS distance of its
+  points to the fitted surface (noise plus whatever the model cannot follow) and h_s their RMS
+  distance from the anchor: the error of a curvature read off a least-squares surface over s
+  points spread over radius h with residual d. ``calib_s`` (:data:`CALIBRATION`) makes sigma_s
+  the measured error on noisy planes and spheres (docs/accuracy.md);
+* walking up the ladder, the intervals [k_s - gamma sigma_s, k_s + gamma sigma_s] of k1 and of
+  k2 are intersected; the walk stops at the first scale whose interval leaves the intersection
+  (the bias of the larger fit has become visible above its noise);
+* of the scales passed, the one with the smallest sigma is kept. Usually that is the largest,
+  but a fit that reached across a thin wall or over a fillet has a large residual distance, and
+  so a large sigma, even when its interval still overlaps.
+
+The kept model is written in the same arrays as ``nfr_anchor_fits`` so that
+:func:`~curvature.fitting.normal_field.nfr_from_anchors` reads it unchanged.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from .kernels import MAX_FOOT_DIST, fit_monge, gather_local, principal_axes, spans_surface
+from .normal_field import nfr_anchor_fits_one, supported
+from .normal_quadric import N_QUAD, curvature_from_quadric, regress_normal_quadric
+from .quadric import OK, foot_point, sampson_rms, shape_operator
+
+__all__ = ["CALIBRATION", "DEFAULT_GAMMA", "DEFAULT_KINDS", "DEFAULT_LADDER", "KIND_MONGE",
+           "KIND_NORMAL_QUADRIC", "SIGMA_FLOOR", "ladder_estimates", "multiscale_anchor_fits",
+           "scale_sigma"]
+
+#: Rung models: a positional Monge quadric, or the normal-constrained quadric.
+KIND_MONGE = 0
+KIND_NORMAL_QUADRIC = 1
+#: Prefix sizes tried below the full neighborhood (only those smaller than it are used), and
+#: the model of each.
+DEFAULT_LADDER = (24, 48, 96, 192)
+DEFAULT_KINDS = (KIND_MONGE, KIND_MONGE, KIND_NORMAL_QUADRIC, KIND_NORMAL_QUADRIC)
+#: Agreement tolerance in standard errors.
+DEFAULT_GAMMA = 5.0
+#: Standard error per unit of d / (h^2 sqrt(s)) of each rung, and of the full-size fit (last
+#: entry): RMS curvature error over that RMS measured on noisy planes, spheres and cylinders
+#: (0.1 to 0.5 % noise, 20,000 points; benchmarks/calibrate_scales.py). Constant within about
+#: 15 % across shapes and noise; the Monge rungs' errors are larger than their residuals say
+#: because the fit sees few points per unknown.
+CALIBRATION = (7.0, 5.8, 1.9, 2.6, 4.4)
+#: Relative floor of sigma (times 1 / h): noise-free fits are exact only up to rounding.
+SIGMA_FLOOR = 1e-7
+# A foot point farther than this many fit units from the anchor means the fit missed it.
+FOOT_LIMIT = 2.0
+
+
+@njit(cache=True)
+def scale_sigma(distance, h, count, calib):
+    """Standard error of a curvature read off a fit (module docstring), in 1 / length."""
+    return max(calib * distance / (h * h * np.sqrt(count)), SIGMA_FLOOR / h)
+
+
+@njit(cache=True)
+def _monge_rung(points, field, p, nbr, quad):
+    """Monge quadric over ``p`` and ``nbr``, packed like the normal-constrained quadric.
+
+    Returns
+    -------
+    status, h, distance, k1, k2
+        Fit status, coordinate unit, RMS residual distance (input units) and the curvatures
+        at p's foot point, signed against ``field[p]`` (the quadric is negated to agree).
+    """
+    xs, h = gather_local(points, p, nbr, True)
+    if not h > 0.0:
+        return 2, 0.0, np.nan, np.nan, np.nan
+    w, axes = principal_axes(xs)
+    if not spans_surface(w):
+        return 2, h, np.nan, np.nan, np.nan
+    a, b, c, ok = fit_monge(xs, axes)
+    if not ok:
+        return 2, h, np.nan, np.nan, np.nan
+    x0, found = foot_point(a, b, c, MAX_FOOT_DIST)
+    if not found:
+        return 3, h, np.nan, np.nan, np.nan
+    g = 2.0 * (a @ x0) + b
+    n_p = field[p]
+    if g[0] * n_p[0] + g[1] * n_p[1] + g[2] * n_p[2] < 0.0:
+        a, b, c, g = -a, -b, -c, -g
+    c1, c2, _, _, _ = shape_operator(g, 2.0 * a)
+    quad[0], quad[1], quad[2] = a[0, 0], a[1, 1], a[2, 2]
+    quad[3], quad[4], quad[5] = a[0, 1], a[0, 2], a[1, 2]
+    quad[6], quad[7], quad[8] = b[0], b[1], b[2]
+    quad[9] = c
+    return OK, h, sampson_rms(a, b, c, xs) * h, c1 / h, c2 / h
+
+
+@njit(cache=True)
+def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out):
+    """Every rung's fit at one anchor (rungs not smaller than the full list are skipped).
+
+    Parameters
+    ----------
+    points, field : ndarray, shape (n, 3)
+    p : int
+    nbr : ndarray, shape (k,)
+        Neighbors of p sorted by distance (p not listed).
+    ladder, kinds : ndarray, shape (l,), int64
+    quads : ndarray, shape (l, N_QUAD)
+        Output: each rung's packed quadric.
+    out : ndarray, shape (l, 5)
+        Output per rung: ok (1 or 0), k1, k2, residual distance, h (the quadric's unit).
+    """
+    origin = np.zeros(3)
+    for li in range(ladder.shape[0]):
+        out[li, 0] = 0.0
+        s = ladder[li]
+        if s >= nbr.shape[0] + 1:
+            continue
+        if kinds[li] == KIND_MONGE:
+            st, h, d, c1, c2 = _monge_rung(points, field, p, nbr[:s - 1], quads[li])
+        else:
+            st, h, _, d = regress_normal_quadric(points, field, p, nbr[:s - 1], True, quads[li])
+            if st == OK:
+                st, c1, c2, _, _, _ = curvature_from_quadric(quads[li], h, origin, FOOT_LIMIT)
+        if st != OK or not supported(c1, c2, h):
+            continue
+        out[li, 0] = 1.0
+        out[li, 1] = c1
+        out[li, 2] = c2
+        out[li, 3] = d
+        out[li, 4] = h
+
+
+@njit(cache=True)
+def _lepski(est, sg, gamma):
+    """Index of the fit to keep: the smallest-sigma one whose k1 and k2 agree with those of
+    every noisier fit within ``gamma`` times the sum of both sigmas (-1 when none is usable).
+
+    Each candidate is compared with every noisier rung directly, not with a running
+    intersection, so one chance disagreement between two noisy small fits does not stop the
+    selection at the noisiest of them.
+    """
+    count = est.shape[0]
+    taken = np.zeros(count, np.bool_)
+    for _ in range(count):
+        c = -1
+        for li in range(count):
+            if not taken[li] and np.isfinite(sg[li]) and (c < 0 or sg[li] < sg[c]):
+                c = li
+        if c < 0:
+            return -1
+        taken[c] = True
+        agrees = True
+        for r in range(count):
+            if r == c or not np.isfinite(sg[r]) or sg[r] < sg[c]:
+                continue
+            tol = gamma * (sg[r] + sg[c])
+            if abs(est[c, 1] - est[r, 1]) > tol or abs(est[c, 2] - est[r, 2]) > tol:
+                agrees = False
+                break
+        if agrees:
+            return c
+    return -1
+
+
+@njit(parallel=True, cache=True)
+def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, ladder, kinds,
+                           gamma, calib, coef, scale, frame, quad, quad_scale, model, residual,
+                           status, chosen, sigma):
+    """Fits at anchors with the neighborhood size chosen per anchor (module docstring).
+
+    Parameters
+    ----------
+    points, field, anchors, indptr, indices, nfr_ratio
+        As for :func:`~curvature.fitting.normal_field.nfr_anchor_fits`; every anchor's
+        neighbor list must be sorted by distance.
+    ladder, kinds : ndarray, shape (l,), int64
+        Increasing prefix sizes (anchor included) tried below the full size, and their models.
+    gamma : float
+        Interval half-width in standard errors.
+    calib : ndarray, shape (l + 1,)
+        Standard-error calibration of every rung and of the full-size fit.
+    coef, scale, frame, quad, quad_scale, model, residual, status
+        Outputs as for ``nfr_anchor_fits``: the kept model.
+    chosen : ndarray, shape (a,), int64
+        Output: points of the kept fit (anchor included).
+    sigma : ndarray, shape (a,)
+        Output: the kept fit's standard error of curvature (inf when none was usable).
+    """
+    levels = ladder.shape[0]
+    for j in prange(anchors.shape[0]):
+        p = anchors[j]
+        nbr = indices[indptr[j]:indptr[j + 1]]
+        full = nbr.shape[0] + 1
+        quads = np.empty((levels, N_QUAD))
+        est = np.empty((levels + 1, 5))
+        ladder_estimates(points, field, p, nbr, ladder, kinds, quads, est)
+        # The full-size fit (both models), as without scale selection, is the last rung.
+        fk1, fk2, fd, fh = nfr_anchor_fits_one(points, field, p, nbr, nfr_ratio, coef[j],
+                                               quad[j], frame[j], j, scale, quad_scale, model,
+                                               residual, status)
+        usable = status[j] == OK and supported(fk1, fk2, fh)
+        est[levels, 0] = 1.0 if usable else 0.0
+        est[levels, 1], est[levels, 2], est[levels, 3], est[levels, 4] = fk1, fk2, fd, fh
+        chosen[j] = full
+        sigma[j] = np.inf
+        sg = np.full(levels + 1, np.inf)
+        for li in range(levels + 1):
+            if est[li, 0] == 1.0:
+                s = full if li == levels else ladder[li]
+                sg[li] = scale_sigma(est[li, 3], est[li, 4], s, calib[li])
+        best = _lepski(est, sg, gamma)
+        if best < 0:
+            continue  # nothing usable: the full fit's status stands
+        sigma[j] = sg[best]
+        if best < levels:
+            chosen[j] = ladder[best]
+            for r in range(N_QUAD):
+                quad[j, r] = quads[best, r]
+            quad_scale[j] = est[best, 4]
+            model[j] = 1  # MODEL_QUADRIC: read with curvature_from_quadric
+            residual[j] = est[best, 3]
+            status[j] = OK
