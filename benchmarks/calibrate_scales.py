@@ -52,7 +52,7 @@ def rung_errors(cloud, anchors: int, k: int = 384, normal_k: int = 48, seed: int
         for li in range(levels + 1):
             if est[li, 0] != 1.0:
                 continue
-            s = k + 1 if li == levels else ladder[li]
+            s = k if li == levels else ladder[li]
             err[li].append(np.hypot(est[li, 1] - t1, est[li, 2] - t2) / np.sqrt(2.0))
             pred[li].append(est[li, 3] / (est[li, 4] ** 2 * np.sqrt(s)))
     return [(float(np.sqrt(np.mean(np.square(e)))), float(np.sqrt(np.mean(np.square(q)))))

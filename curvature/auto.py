@@ -33,8 +33,15 @@ import numpy as np
 from numba import njit
 
 from .fitting.kernels import FIT_IMPLICIT, FIT_MONGE, SOLVER_TAUBIN, fit_batch
-from .fitting.normal_field import N_TERMS, nfr_anchor_fits, nfr_from_anchors, pca_normals
+from .fitting.normal_field import (
+    N_TERMS,
+    SUPPORT,
+    nfr_anchor_fits,
+    nfr_from_anchors,
+    pca_normals,
+)
 from .fitting.normal_quadric import N_QUAD
+from .fitting.outliers import off_surface
 from .fitting import scale_selection
 from .fitting.scale_selection import KIND_MONGE, multiscale_anchor_fits
 from .neighborhoods.kdtree import build_tree, knn_parallel
@@ -69,6 +76,12 @@ PLAN_CELLS = 64
 ANCHOR_CELL = 1.5
 # Fewest neighbors max_share lowers k to.
 SHARE_MIN_K = 48
+# Clean clouds: smaller implicit fits tried where the 24-neighbor one is not exact, the
+# residual (relative to spacing) below which a fit counts as exact, and how much larger than
+# the smallest residual the kept (largest) fit's may be.
+CLEAN_SIZES = (16, 12)
+CLEAN_EXACT = 1e-9
+CLEAN_RESIDUAL_RATIO = 50.0
 
 
 @dataclass(frozen=True)
@@ -121,8 +134,9 @@ def _grid_keys(points, origin, cell):
 
 
 @njit(cache=True)
-def _cell_representatives(points, cells, cell_of, origin, cell):
-    """Per cell, the point nearest the cell's centre (ties: smaller x, then y, then z).
+def _cell_representatives(points, cells, cell_of, origin, cell, avoid):
+    """Per cell, the point nearest the cell's centre (ties: smaller x, then y, then z), among
+    the points not in ``avoid`` where the cell has any.
 
     Parameters
     ----------
@@ -134,6 +148,8 @@ def _cell_representatives(points, cells, cell_of, origin, cell):
     origin : ndarray, shape (3,)
     cell : float
         Grid corner and cell size (each point's cell centre is recomputed from them).
+    avoid : ndarray, shape (n,), bool
+        Points that represent a cell only when it has no other.
 
     Returns
     -------
@@ -149,6 +165,12 @@ def _cell_representatives(points, cells, cell_of, origin, cell):
             center = origin[t] + (_cell_ijk(points[i, t], origin, cell, t) + 0.5) * cell
             d += (points[i, t] - center) ** 2
         b = best[c]
+        if b >= 0 and avoid[i] != avoid[b]:
+            if avoid[i]:
+                continue
+            best[c] = i
+            best_d[c] = d
+            continue
         if b < 0 or d < best_d[c] or (d == best_d[c] and (
                 points[i, 0], points[i, 1], points[i, 2]) < (points[b, 0], points[b, 1],
                                                              points[b, 2])):
@@ -157,8 +179,8 @@ def _cell_representatives(points, cells, cell_of, origin, cell):
     return best
 
 
-def grid_cells(points: np.ndarray, origin: np.ndarray,
-               cell: float) -> tuple[np.ndarray, np.ndarray]:
+def grid_cells(points: np.ndarray, origin: np.ndarray, cell: float,
+               avoid: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Representatives of the occupied cells of a grid, and each point's cell.
 
     Parameters
@@ -168,6 +190,8 @@ def grid_cells(points: np.ndarray, origin: np.ndarray,
         Grid corner.
     cell : float
         Cell size.
+    avoid : ndarray, shape (n,), bool, optional
+        Points that represent a cell only when it has no other (outliers).
 
     Returns
     -------
@@ -180,7 +204,9 @@ def grid_cells(points: np.ndarray, origin: np.ndarray,
     # Keys in one pass (no (n, 3) temporaries: this runs on whole 10M-point clouds).
     ukeys, cell_of = np.unique(_grid_keys(points, origin, float(cell)), return_inverse=True)
     cell_of = cell_of.ravel()
-    best = _cell_representatives(points, ukeys.shape[0], cell_of, origin, float(cell))
+    if avoid is None:
+        avoid = np.zeros(points.shape[0], np.bool_)
+    best = _cell_representatives(points, ukeys.shape[0], cell_of, origin, float(cell), avoid)
     del ukeys
     order = np.argsort(best)
     reps = best[order]
@@ -278,18 +304,23 @@ class AutoRun:
         self.timings: dict[str, float] = {"plan": time.perf_counter() - t0}
         self.track_reach = track_reach
         self.reach: np.ndarray | None = None
+        self.outliers = np.zeros(points.shape[0], bool)
 
     def run(self, res, graph, orient_k: int) -> None:
         """Fill every output array of ``res`` and the orientation graph (n, orient_k)."""
         n = self.points.shape[0]
         k_stage1 = min(max(self.params["normal_k"], PLAN_K, orient_k), n - 1)
         kc = min(self.fit_k(), n - 1)
-        reps, owner = grid_cells(self.points, np.asarray(self.plan.origin), self.plan.cell)
-        anchors_total = 0 if self.plan.clean else 2 * reps.shape[0]
-        self._total = 2 * n + anchors_total
+        self._total = 2 * n
         self._done = 0
         t0 = time.perf_counter()
         field, radius = self._stage1(res, graph, k_stage1)
+        # Anchors among the inliers (an outlier cannot anchor its cell's fits); outliers'
+        # normals are left out of every fit.
+        reps, owner = grid_cells(self.points, np.asarray(self.plan.origin), self.plan.cell,
+                                 avoid=self.outliers)
+        field[self.outliers] = np.nan
+        self._total += 0 if self.plan.clean else 2 * reps.shape[0]
         self.timings["stage1"] = time.perf_counter() - t0
         if self.track_reach:
             self.reach = radius[1] if self.plan.clean else np.zeros(n)
@@ -336,13 +367,58 @@ class AutoRun:
             if graph is not None:
                 graph[sl] = nbr[:, :graph.shape[1]]
             pca_normals(self.points, query, *_prefix_csr(nbr, normal_k), field[sl])
+            off_surface(self.points, query, np.ascontiguousarray(nbr[:, :normal_k]), field[sl],
+                        self.plan.spacing, self.outliers[sl])
             if self.plan.clean:
-                fit_batch(self.points, query, *_prefix_csr(nbr, kp), FIT_IMPLICIT,
-                          SOLVER_TAUBIN, True, *_outputs(res, sl))
-                res.neighbor_count[sl] = kp
+                self._clean_fits(res, sl, query, nbr, d2, kp)
                 r_fit[sl] = np.sqrt(d2[:, kp - 1])
             self._tick(2 * (sl.stop - sl.start) if self.plan.clean else sl.stop - sl.start)
         return field, (r_normal, r_fit)
+
+    def _clean_fits(self, res, sl, query, nbr, d2, kp) -> None:
+        """Implicit quadrics of a chunk of a clean cloud, written to ``res`` rows ``sl``.
+
+        Over ``kp`` (24) neighbors first; where that fit is not exact, also over 16 and 12,
+        keeping the largest whose residual distance is within :data:`CLEAN_RESIDUAL_RATIO` of
+        the smallest: a fit that straddles a curvature jump (a face beside a fillet) has a far
+        larger residual than one on a single piece, while on smooth non-quadric surfaces the
+        residuals grow slowly with size and 24 stays. A kept fit whose curvature the points
+        do not support (:func:`~curvature.fitting.normal_field.supported`) is marked
+        degenerate; :meth:`run` gives such points the anchored fits.
+        """
+        fit_batch(self.points, query, *_prefix_csr(nbr, kp), FIT_IMPLICIT, SOLVER_TAUBIN, True,
+                  *_outputs(res, sl))
+        res.neighbor_count[sl] = kp
+        floor = CLEAN_EXACT * self.plan.spacing
+        rows = np.flatnonzero(~(res.residual[sl] <= floor))  # NaN (failed) included
+        best = res.residual[sl][rows].copy()
+        best[~np.isfinite(best)] = np.inf
+        for size in CLEAN_SIZES:
+            if size >= kp or rows.size == 0:
+                continue
+            out = _OutputView(res, sl.start + rows)
+            fit_batch(self.points, query[rows], *_prefix_csr(nbr[rows], size), FIT_IMPLICIT,
+                      SOLVER_TAUBIN, True, *out.arrays)
+            resid = np.where(out.arrays[6] == Status.OK, out.arrays[5], np.inf)
+            best = np.minimum(best, resid)
+            # Sizes go down: keep this one only where the larger kept one is not near the best.
+            kept = res.residual[sl][rows]
+            take = ~(kept <= CLEAN_RESIDUAL_RATIO * best + floor) & (resid < np.inf)
+            if take.any():
+                out.rows, out.arrays = out.rows[take], tuple(a[take] for a in out.arrays)
+                out.store(size)
+        count = res.neighbor_count[sl]
+        h = np.sqrt(np.take_along_axis(np.cumsum(d2, axis=1), count[:, None] - 1,
+                                       axis=1)[:, 0] / count)
+        curv = np.maximum(np.abs(res.k1[sl]), np.abs(res.k2[sl]))
+        loose = np.flatnonzero(curv * h > SUPPORT)
+        if loose.size:
+            rows = sl.start + loose
+            for arr in (res.k1, res.k2, res.residual):
+                arr[rows] = np.nan
+            for arr in (res.normals, res.dir1, res.dir2):
+                arr[rows] = np.nan
+            res.status[rows] = Status.DEGENERATE_FIT
 
     def _anchored(self, res, field, r_normal, reps, owner, kc) -> None:
         """Two passes of anchored normal fits over ``kc`` neighbors of every anchor."""
@@ -411,7 +487,7 @@ class AutoRun:
             With ``track_reach``: the largest ``distance + w[q]`` over the anchor and its
             ``k`` neighbors q (the chosen fit uses a subset of them).
         chosen : ndarray, shape (a,), int64
-            Points of each anchor's kept fit (anchor included).
+            Neighbors of each anchor's kept fit.
         """
         a = anchors.shape[0]
         coef = np.empty((a, 2, N_TERMS))
@@ -421,7 +497,7 @@ class AutoRun:
         model = np.empty(a, np.int8)
         status = np.empty(a, np.int8)
         reach = np.empty(a) if self.track_reach else None
-        chosen = np.full(a, k + 1, np.int64)
+        chosen = np.full(a, k, np.int64)
         sigma = np.empty(a)
         gamma = self.params["scale_gamma"]
         kinds = np.asarray(scale_selection.DEFAULT_KINDS, np.int64)

@@ -82,7 +82,16 @@ def _monge_rung(points, field, p, nbr, quad):
         Fit status, coordinate unit, RMS residual distance (input units) and the curvatures
         at p's foot point, signed against ``field[p]`` (the quadric is negated to agree).
     """
-    xs, h = gather_local(points, p, nbr, True)
+    # Neighbors without a normal are outliers (curvature.fitting.outliers): left out.
+    keep = np.empty(nbr.shape[0], nbr.dtype)
+    count = 0
+    for i in range(nbr.shape[0]):
+        if np.isfinite(field[nbr[i], 0]):
+            keep[count] = nbr[i]
+            count += 1
+    if count < 6:
+        return 1, 0.0, np.nan, np.nan, np.nan
+    xs, h = gather_local(points, p, keep[:count], True)
     if not h > 0.0:
         return 2, 0.0, np.nan, np.nan, np.nan
     w, axes = principal_axes(xs)
@@ -126,12 +135,12 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out):
     for li in range(ladder.shape[0]):
         out[li, 0] = 0.0
         s = ladder[li]
-        if s >= nbr.shape[0] + 1:
+        if s >= nbr.shape[0]:
             continue
         if kinds[li] == KIND_MONGE:
-            st, h, d, c1, c2 = _monge_rung(points, field, p, nbr[:s - 1], quads[li])
+            st, h, d, c1, c2 = _monge_rung(points, field, p, nbr[:s], quads[li])
         else:
-            st, h, _, d = regress_normal_quadric(points, field, p, nbr[:s - 1], True, quads[li])
+            st, h, _, d = regress_normal_quadric(points, field, p, nbr[:s], True, quads[li])
             if st == OK:
                 st, c1, c2, _, _, _ = curvature_from_quadric(quads[li], h, origin, FOOT_LIMIT)
         if st != OK or not supported(c1, c2, h):
@@ -187,7 +196,8 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
         As for :func:`~curvature.fitting.normal_field.nfr_anchor_fits`; every anchor's
         neighbor list must be sorted by distance.
     ladder, kinds : ndarray, shape (l,), int64
-        Increasing prefix sizes (anchor included) tried below the full size, and their models.
+        Increasing neighbor counts (the anchor takes part besides) tried below the full list,
+        and their models.
     gamma : float
         Interval half-width in standard errors.
     calib : ndarray, shape (l + 1,)
@@ -195,7 +205,7 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
     coef, scale, frame, quad, quad_scale, model, residual, status
         Outputs as for ``nfr_anchor_fits``: the kept model.
     chosen : ndarray, shape (a,), int64
-        Output: points of the kept fit (anchor included).
+        Output: neighbors of the kept fit (the anchor takes part besides).
     sigma : ndarray, shape (a,)
         Output: the kept fit's standard error of curvature (inf when none was usable).
     """
@@ -203,7 +213,7 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
     for j in prange(anchors.shape[0]):
         p = anchors[j]
         nbr = indices[indptr[j]:indptr[j + 1]]
-        full = nbr.shape[0] + 1
+        full = nbr.shape[0]
         quads = np.empty((levels, N_QUAD))
         est = np.empty((levels + 1, 5))
         ladder_estimates(points, field, p, nbr, ladder, kinds, quads, est)
