@@ -19,6 +19,19 @@ On noisy scans the neighborhood size decides the error far more than the fit mod
    of the first. Anchors cut the work of the large fits about thirteenfold at no measured loss
    of accuracy; the second pass lowers the error further (torus at 0.5 % noise: 0.035 -> 0.026).
    On clouds of fewer than ``k / max_share`` points ``k`` is lowered (:meth:`AutoRun.fit_k`).
+4. **Scale per anchor** (:mod:`curvature.fitting.scale_selection`): beside the fit over ``k``
+   neighbors, each anchor fits nested prefixes of its neighbor list (Monge quadrics over 24 and
+   48 positions, normal-constrained quadrics over 96 and 192) and keeps the largest fit whose
+   curvature agrees with every smaller one within ``scale_gamma`` standard errors. Flat faces
+   keep large fits, fillets, corners and leading edges small ones (pass 2; pass 1, which only
+   refines normals, uses the normal-fit rungs). ``neighbor_count`` reports the kept size.
+5. **Guards**: a fit whose curvature radius is below half the spread of its points
+   (``|k| h > 2``) is not admitted and points fall back to their anchor's own reading, so a
+   plane never reads 10^5; points far off their neighbors' surface (outliers,
+   :mod:`curvature.fitting.outliers`) are left out of every fit and never anchor a cell. On
+   clean clouds the implicit quadric over 24 neighbors is replaced by one over 16 or 12 where it
+   straddles a curvature jump (its residual far above the smaller fits'), and a fit with
+   ``|k| h > 1`` goes to the anchored fits.
 
 Everything depends on the points' coordinates only, never on their order, so the results are
 identical for any point order and any ``workers``.
@@ -32,17 +45,16 @@ from dataclasses import asdict, dataclass
 import numpy as np
 from numba import njit
 
+from .fitting import scale_selection
 from .fitting.kernels import FIT_IMPLICIT, FIT_MONGE, SOLVER_TAUBIN, fit_batch
 from .fitting.normal_field import (
     N_TERMS,
-    SUPPORT,
     nfr_anchor_fits,
     nfr_from_anchors,
     pca_normals,
 )
 from .fitting.normal_quadric import N_QUAD
 from .fitting.outliers import off_surface
-from .fitting import scale_selection
 from .fitting.scale_selection import KIND_MONGE, multiscale_anchor_fits
 from .neighborhoods.kdtree import build_tree, knn_parallel
 from .params import ParamSpec
@@ -62,8 +74,8 @@ AUTO_PARAMS = (
                    "everywhere; large: field everywhere)"),
     ParamSpec("scale_gamma", float, 5.0, 0.0, 100.0,
               help="per-anchor neighborhood size on noisy clouds: of the fits over 24, 48, 96, "
-                   "192 and k neighbors, the least noisy whose curvature agrees with every "
-                   "noisier one within this many standard errors (0: every anchor uses k)"),
+                   "192 and k neighbors, the largest whose curvature agrees with every smaller "
+                   "one within this many standard errors (0: every anchor uses k)"),
     ParamSpec("noise_threshold", float, 0.01, 0.0, 1.0,
               help="relative noise (RMS residual / spacing) below which a cloud counts as clean "
                    "and gets the implicit quadric over 24 neighbors"),
@@ -82,6 +94,10 @@ SHARE_MIN_K = 48
 CLEAN_SIZES = (16, 12)
 CLEAN_EXACT = 1e-9
 CLEAN_RESIDUAL_RATIO = 50.0
+# The support limit of clean fits (|k| h, h their RMS neighbor distance), tighter than the
+# noisy fits' SUPPORT: a leading edge of 3.5 spacings reads 0.53 over 24 neighbors, while the
+# implicit quadrics that straddle a fillet's edge read 1.5 and more.
+CLEAN_SUPPORT = 1.0
 
 
 @dataclass(frozen=True)
@@ -383,7 +399,7 @@ class AutoRun:
         the smallest: a fit that straddles a curvature jump (a face beside a fillet) has a far
         larger residual than one on a single piece, while on smooth non-quadric surfaces the
         residuals grow slowly with size and 24 stays. A kept fit whose curvature the points
-        do not support (:func:`~curvature.fitting.normal_field.supported`) is marked
+        do not support (``|k| h`` above :data:`CLEAN_SUPPORT`) is marked
         degenerate; :meth:`run` gives such points the anchored fits.
         """
         fit_batch(self.points, query, *_prefix_csr(nbr, kp), FIT_IMPLICIT, SOLVER_TAUBIN, True,
@@ -411,7 +427,7 @@ class AutoRun:
         h = np.sqrt(np.take_along_axis(np.cumsum(d2, axis=1), count[:, None] - 1,
                                        axis=1)[:, 0] / count)
         curv = np.maximum(np.abs(res.k1[sl]), np.abs(res.k2[sl]))
-        loose = np.flatnonzero(curv * h > SUPPORT)
+        loose = np.flatnonzero(curv * h > CLEAN_SUPPORT)
         if loose.size:
             rows = sl.start + loose
             for arr in (res.k1, res.k2, res.residual):
@@ -514,7 +530,8 @@ class AutoRun:
                       resid[sl], status[sl])
             if gamma > 0.0:
                 multiscale_anchor_fits(self.points, field, anchors[sl], indptr, indices,
-                                       self.params["nfr_ratio"], ladder, kinds, gamma, calib,
+                                       self.params["nfr_ratio"], ladder, kinds, gamma,
+                                       scale_selection.SIGMA_GROWTH, calib,
                                        *arrays, chosen[sl], sigma[sl])
             else:
                 nfr_anchor_fits(self.points, field, anchors[sl], indptr, indices,

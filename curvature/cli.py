@@ -127,10 +127,12 @@ def build_parser() -> argparse.ArgumentParser:
     add_method_options(nb)
 
     bench = sub.add_parser("bench", help="regenerate a benchmark study (CSV and PNG plots)")
-    bench.add_argument("study", choices=["paper", "accuracy"],
+    bench.add_argument("study", choices=["paper", "accuracy", "parts"],
                        help="paper: the accuracy study of Khameneifar & Feng (2019); "
                             "accuracy: the default estimator against issue 6's targets, beside "
-                            "the paper preset and APSS (when pymeshlab is installed)")
+                            "the paper preset and APSS (when pymeshlab is installed), then the "
+                            "part shapes; parts: the part shapes alone, per region, beside APSS "
+                            "and CGAL jet fitting (when installed)")
     bench.add_argument("--out", required=True, help="output folder")
     bench.add_argument("--quick", action="store_true", help="reduced grid (about a minute)")
     bench.add_argument("--seeds", type=int, default=None,
@@ -141,7 +143,8 @@ def build_parser() -> argparse.ArgumentParser:
                        help="folder holding bun000.ply (default: ../shared/data next to the "
                             "repository)")
     bench.add_argument("--no-apss", action="store_true",
-                       help="accuracy: leave MeshLab's APSS out even if pymeshlab is installed")
+                       help="accuracy, parts: leave MeshLab's APSS out even if pymeshlab is "
+                            "installed")
     add_plugins(sub)
     return parser
 
@@ -297,6 +300,8 @@ def cmd_bench(args) -> int:
         raise CurvatureInputError(f"--seeds must be >= 1, got {args.seeds}")
     if args.study == "accuracy":
         return bench_accuracy(args)
+    if args.study == "parts":
+        return bench_parts(args, args.out)
     data = Path(args.data) if args.data else paper_study.default_data_dir()
     scan = data / paper_study.SCAN_NAME
     if not scan.is_file():
@@ -322,6 +327,14 @@ def bench_accuracy(args) -> int:
     config = (accuracy_study.AccuracyConfig.quick if args.quick
               else accuracy_study.AccuracyConfig.full)(**changes)
     accuracy_study.run_accuracy(config, args.out)
+    return bench_parts(args, Path(args.out) / "parts")
+
+
+def bench_parts(args, out) -> int:
+    from . import parts_study
+
+    estimators = [e for e in parts_study.ESTIMATORS if not (args.no_apss and e == "apss")]
+    parts_study.run_parts(out, quick=args.quick, estimators=estimators)
     return 0
 
 

@@ -2,12 +2,13 @@
 
 A fixed neighborhood size trades bias against noise once for the whole cloud: large fits
 average noise away on flat faces but blur fillets, corners and leading edges and reach across
-thin walls; small fits follow features but are noisy. Here every anchor fits the
-normal-constrained quadric (:mod:`curvature.fitting.normal_quadric`) (or a Monge quadric) on nested
-prefixes of its sorted neighbor list (the ``ladder``, e.g. 24, 48, 96, 192 neighbors) beside the full-size fit of
+thin walls; small fits follow features but are noisy. Here every anchor fits Monge quadrics
+and normal-constrained quadrics (:mod:`curvature.fitting.normal_quadric`) on nested prefixes of
+its sorted neighbor list (the ``ladder``: 24, 48, 96, 192 neighbors) beside the full-size fit of
 :func:`~curvature.fitting.normal_field.nfr_anchor_fits`, and keeps one of them by the
-intersection of confidence intervals rule (ICI; Goldenshluger & Nemirovski, Math. Methods
-Statist. 6 (1997); Katkovnik, Signal Processing 1999):
+rule of Lepski (Lepski, Mammen & Spokoiny, Ann. Statist. 25 (1997)), the pairwise form of the
+intersection of confidence intervals rule (Goldenshluger & Nemirovski, Math. Methods Statist. 6
+(1997)):
 
 * the small rungs are positional Monge fits (a quadratic height function over the anchor's
   PCA plane): the stage-1 normals are PCA normals over 48 neighbors, smoothed across any
@@ -20,12 +21,11 @@ Statist. 6 (1997); Katkovnik, Signal Processing 1999):
   distance from the anchor: the error of a curvature read off a least-squares surface over s
   points spread over radius h with residual d. ``calib_s`` (:data:`CALIBRATION`) makes sigma_s
   the measured error on noisy planes and spheres (docs/accuracy.md);
-* walking up the ladder, the intervals [k_s - gamma sigma_s, k_s + gamma sigma_s] of k1 and of
-  k2 are intersected; the walk stops at the first scale whose interval leaves the intersection
-  (the bias of the larger fit has become visible above its noise);
-* of the scales passed, the one with the smallest sigma is kept. Usually that is the largest,
-  but a fit that reached across a thin wall or over a fillet has a large residual distance, and
-  so a large sigma, even when its interval still overlaps.
+* the largest fit is kept whose k1 and k2 agree with those of every smaller fit within
+  ``gamma (sigma_s + sigma_r)`` (Lepski's rule: its bias is not visible above the noise of
+  any smaller fit), and whose sigma is at most :data:`SIGMA_GROWTH` times the smallest below
+  it: a fit that reached across a thin wall or over an edge has a large residual distance,
+  and so a large sigma, even while its wide interval still overlaps the others.
 
 The kept model is written in the same arrays as ``nfr_anchor_fits`` so that
 :func:`~curvature.fitting.normal_field.nfr_from_anchors` reads it unchanged.
@@ -60,6 +60,8 @@ DEFAULT_GAMMA = 5.0
 #: 15 % across shapes and noise; the Monge rungs' errors are larger than their residuals say
 #: because the fit sees few points per unknown.
 CALIBRATION = (7.0, 5.8, 1.9, 2.6, 4.4)
+#: A fit whose sigma exceeds the smallest sigma below it by more than this is turned down.
+SIGMA_GROWTH = 2.0
 #: Relative floor of sigma (times 1 / h): noise-free fits are exact only up to rounding.
 SIGMA_FLOOR = 1e-7
 # A foot point farther than this many fit units from the anchor means the fit missed it.
@@ -153,41 +155,40 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out):
 
 
 @njit(cache=True)
-def _lepski(est, sg, gamma):
-    """Index of the fit to keep: the smallest-sigma one whose k1 and k2 agree with those of
-    every noisier fit within ``gamma`` times the sum of both sigmas (-1 when none is usable).
+def _lepski(est, sg, gamma, growth):
+    """Index of the fit to keep: the largest whose k1 and k2 agree with those of every smaller
+    fit within ``gamma`` times the sum of both sigmas, and whose sigma is at most ``growth``
+    times the smallest sigma below it (-1 when none is usable).
 
-    Each candidate is compared with every noisier rung directly, not with a running
+    Each candidate is compared with every smaller rung directly, not with a running
     intersection, so one chance disagreement between two noisy small fits does not stop the
-    selection at the noisiest of them.
+    selection at the smallest of them. The growth test turns down a large fit whose residual
+    jumped (it reached across a thin wall or over an edge) even while its wide interval still
+    overlaps the others.
     """
     count = est.shape[0]
-    taken = np.zeros(count, np.bool_)
-    for _ in range(count):
-        c = -1
-        for li in range(count):
-            if not taken[li] and np.isfinite(sg[li]) and (c < 0 or sg[li] < sg[c]):
-                c = li
-        if c < 0:
-            return -1
-        taken[c] = True
+    for c in range(count - 1, -1, -1):
+        if not np.isfinite(sg[c]):
+            continue
         agrees = True
-        for r in range(count):
-            if r == c or not np.isfinite(sg[r]) or sg[r] < sg[c]:
+        smallest = np.inf
+        for r in range(c):
+            if not np.isfinite(sg[r]):
                 continue
+            smallest = min(smallest, sg[r])
             tol = gamma * (sg[r] + sg[c])
             if abs(est[c, 1] - est[r, 1]) > tol or abs(est[c, 2] - est[r, 2]) > tol:
                 agrees = False
                 break
-        if agrees:
+        if agrees and sg[c] <= growth * smallest:
             return c
     return -1
 
 
 @njit(parallel=True, cache=True)
 def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, ladder, kinds,
-                           gamma, calib, coef, scale, frame, quad, quad_scale, model, residual,
-                           status, chosen, sigma):
+                           gamma, growth, calib, coef, scale, frame, quad, quad_scale, model,
+                           residual, status, chosen, sigma):
     """Fits at anchors with the neighborhood size chosen per anchor (module docstring).
 
     Parameters
@@ -199,7 +200,9 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
         Increasing neighbor counts (the anchor takes part besides) tried below the full list,
         and their models.
     gamma : float
-        Interval half-width in standard errors.
+        Agreement tolerance in standard errors.
+    growth : float
+        Largest ratio of a kept fit's sigma to the smallest sigma of the fits below it.
     calib : ndarray, shape (l + 1,)
         Standard-error calibration of every rung and of the full-size fit.
     coef, scale, frame, quad, quad_scale, model, residual, status
@@ -231,7 +234,7 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
             if est[li, 0] == 1.0:
                 s = full if li == levels else ladder[li]
                 sg[li] = scale_sigma(est[li, 3], est[li, 4], s, calib[li])
-        best = _lepski(est, sg, gamma)
+        best = _lepski(est, sg, gamma, growth)
         if best < 0:
             continue  # nothing usable: the full fit's status stands
         sigma[j] = sg[best]

@@ -40,7 +40,9 @@ def test_noise_free_shapes_within_issue_limits(shape, kwargs, limit):
     assert res.info["plan"]["clean"] and res.info["plan"]["noise"] < 0.01
     rel = relative_errors(cloud, res)
     assert max(rel) <= limit, rel
-    assert np.all(res.neighbor_count == 24)
+    # 24 neighbors, 16 or 12 only where the 24-point fit is far from exact (none here mostly)
+    assert set(np.unique(res.neighbor_count)) <= {12, 16, 24}
+    assert np.mean(res.neighbor_count == 24) > 0.9
 
 
 # Issue 6: at most half of MeshLab APSS's mean |k1| / |k2| errors at 0.5 % BBD noise.
@@ -59,8 +61,10 @@ def test_noisy_shapes_meet_half_of_apss(shape, kwargs, limit):
     assert res.info["fit"] == "nfr" and not res.info["plan"]["clean"]
     e1, e2 = mean_errors(cloud, res)
     assert e1 <= limit[0] and e2 <= limit[1], (e1, e2)
-    # both passes fit k = 384 neighbors around each cell's anchor
-    assert np.all(res.neighbor_count == 384)
+    # each anchor keeps the least noisy fit that agrees with the noisier ones: on smooth
+    # shapes mostly the full 384 neighbors
+    assert set(np.unique(res.neighbor_count)) <= {24, 48, 96, 192, 384}
+    assert np.mean(res.neighbor_count == 384) > 0.5
 
 
 @pytest.mark.parametrize("shape, kwargs, forced", [
@@ -69,9 +73,11 @@ def test_choosing_the_model_per_anchor_beats_either_model_alone(shape, kwargs, f
     # the cubic field alone flattens the ellipsoid's tips (k1 = 3); the quadric alone is biased
     # on the torus at 384 points; the misfit rule keeps the better one (docs/accuracy.md)
     cloud = synthetic.make(shape, 10_000, noise=0.1, seed=2, **kwargs)
-    chosen = mean_errors(cloud, curvature.estimate(cloud.points, normals=cloud.normals))
+    # at one scale (scale_gamma=0), so that the model rule is measured alone
+    chosen = mean_errors(cloud, curvature.estimate(cloud.points, normals=cloud.normals,
+                                                   scale_gamma=0.0))
     alone = mean_errors(cloud, curvature.estimate(cloud.points, normals=cloud.normals,
-                                                  nfr_ratio=forced))
+                                                  nfr_ratio=forced, scale_gamma=0.0))
     assert chosen[0] < 0.6 * alone[0], (chosen, alone)
 
 
@@ -79,7 +85,7 @@ def test_small_clouds_cap_the_neighborhood_at_a_share_of_the_cloud():
     # 2,000 points on the torus: 384 neighbors would span more than its tube (radius 1)
     cloud = synthetic.torus(2000, noise=0.1, seed=1)
     res = curvature.estimate(cloud.points, normals=cloud.normals)
-    assert np.all(res.neighbor_count == 80)  # 4 % of 2,000
+    assert res.neighbor_count.max() == 80  # 4 % of 2,000 (smaller where a feature asks)
     capped = mean_errors(cloud, res)
     assert capped[0] < 0.06 and capped[1] < 0.06, capped
     uncapped = mean_errors(cloud, curvature.estimate(cloud.points, normals=cloud.normals,
@@ -87,7 +93,7 @@ def test_small_clouds_cap_the_neighborhood_at_a_share_of_the_cloud():
     assert uncapped[0] > 4 * capped[0], (capped, uncapped)  # measured 0.33 against 0.04
     # never below 48 neighbors; clouds of 9,600 points and more keep k
     tiny = curvature.estimate(synthetic.torus(600, noise=0.3, seed=2).points)
-    assert np.all(tiny.neighbor_count == 48)
+    assert tiny.neighbor_count.max() == 48
     assert tiny.info["plan"]["points"] == 600
 
 

@@ -507,6 +507,7 @@ def test_interior_mask_cylinder_and_bezier():
 def test_shapes_and_make():
     assert set(synthetic.SHAPES) == {
         "sphere", "ellipsoid", "cylinder", "plane", "saddle", "torus", "bezier",
+        "filleted_box", "filleted_cylinder", "blade", "thin_plate",
     }
     c = synthetic.make("torus", 100, major=3.0, minor=1.0, seed=1)
     assert c.name == "torus" and c.params["major"] == 3.0 and len(c) == 100
