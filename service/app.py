@@ -40,7 +40,8 @@ stable and documented under `/problems/{slug}`.
 """
 
 INTERRUPTED = ProblemError(
-    "worker-crashed", "the service stopped while this job ran, too many times").to_dict()
+    "worker-crashed", "the service was restarted while this job ran, too many times "
+    "(CURVATURE_MAX_RESTARTS)").to_dict()
 
 
 @asynccontextmanager
@@ -62,7 +63,7 @@ async def lifespan(app: FastAPI):
     store = JobStore(settings.db_path, settings.store_busy_timeout_seconds)
     await anyio.to_thread.run_sync(store.initialize)
     requeued, failed = await anyio.to_thread.run_sync(
-        store.requeue_interrupted, settings.max_attempts, INTERRUPTED,
+        store.requeue_interrupted, settings.max_restarts, INTERRUPTED,
         settings.result_ttl_seconds)
     if requeued or failed:
         log.warning("recovered interrupted jobs: %d re-queued, %d failed", requeued, failed)

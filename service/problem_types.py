@@ -54,6 +54,9 @@ _TYPES = [
                 "The cloud has more points than the service accepts (CURVATURE_MAX_POINTS)."),
     ProblemType("too-many-points", 413, "Too many points for a synchronous answer",
                 "The cloud is larger than the synchronous limit; submit it as a job."),
+    ProblemType("too-costly", 413, "Too costly for a synchronous answer",
+                "The parameters ask for more work than a synchronous answer may take "
+                "(CURVATURE_SYNC_MAX_COST); use cheaper parameters or submit it as a job."),
     ProblemType("job-not-found", 404, "Job not found",
                 "No job has this id (it never existed, was deleted or has expired)."),
     ProblemType("result-not-ready", 409, "Result not ready",

@@ -219,7 +219,10 @@ class Job(BaseModel):
     params: dict[str, Any]
     input: JobInput
     n_points: int | None
-    attempts: int
+    attempts: int = Field(description="Runs charged to the job: those it started and that "
+                          "crashed or finished (a run stopped for another job's sake or by a "
+                          "server restart is not charged).")
+    restarts: int = Field(0, description="Server restarts that interrupted a run of the job.")
     created_at: datetime
     started_at: datetime | None
     finished_at: datetime | None

@@ -64,6 +64,17 @@ class Settings(BaseSettings):
         64 << 20, ge=1024, description="Largest accepted JSON body (parsed in memory).")
     sync_max_points: int = Field(
         50_000, ge=10, description="Largest cloud POST /v1/curvature answers synchronously.")
+    sync_time_limit_seconds: float = Field(
+        60, gt=0, description="A synchronous computation running longer than this (or than "
+        "job_time_limit_seconds, if smaller) is killed and answered 422 'time-limit'.")
+    sync_max_cost: float = Field(
+        2e9, gt=0, description="Work units (points times a per-point cost of the method's "
+        "parameters, see docs/reliability.md) a synchronous request may ask for; more is "
+        "answered 413 'too-costly'.")
+    sync_workers: int = Field(
+        1, ge=1, le=64, description="Processes serving synchronous requests, apart from the "
+        "job pool (each is killed on its own when its request runs too long or its client "
+        "hangs up).")
     max_pending_sync: int = Field(
         8, ge=1, description="Synchronous requests allowed to wait for a worker at once.")
     max_points: int = Field(
@@ -80,7 +91,11 @@ class Settings(BaseSettings):
     store_busy_timeout_seconds: float = Field(
         30, gt=0, description="How long a store operation waits for a locked SQLite file.")
     max_attempts: int = Field(
-        3, ge=1, description="Runs of one job (crashes, restarts) before it is marked failed.")
+        3, ge=1, description="Runs of one job that killed their worker process before the job "
+        "is quarantined (failed with 'worker-crashed').")
+    max_restarts: int = Field(
+        25, ge=1, description="Server restarts one job may be interrupted by before it is "
+        "marked failed (counted apart from max_attempts).")
     retry_after_seconds: int = Field(5, ge=1, description="Retry-After sent with 503.")
 
     result_ttl_seconds: float = Field(

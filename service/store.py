@@ -23,7 +23,7 @@ QUEUED, RUNNING, SUCCEEDED, FAILED, CANCELLED = (
 STATUSES = (QUEUED, RUNNING, SUCCEEDED, FAILED, CANCELLED)
 FINAL_STATUSES = (SUCCEEDED, FAILED, CANCELLED)
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS jobs (
     seq INTEGER PRIMARY KEY AUTOINCREMENT,
@@ -45,12 +45,19 @@ CREATE TABLE IF NOT EXISTS jobs (
     attempts INTEGER NOT NULL DEFAULT 0,
     run_token TEXT,
     error TEXT,
-    summary TEXT
+    summary TEXT,
+    restarts INTEGER NOT NULL DEFAULT 0,
+    worker_pid INTEGER,
+    result_sha256 TEXT,
+    checksums TEXT
 );
 CREATE INDEX IF NOT EXISTS jobs_owner_seq ON jobs (owner, seq);
 CREATE INDEX IF NOT EXISTS jobs_status_seq ON jobs (status, seq);
 CREATE INDEX IF NOT EXISTS jobs_expires ON jobs (expires_at);
 """
+# Columns added after version 1, with their definitions, for stores created before them.
+_ADDED_COLUMNS = {"restarts": "INTEGER NOT NULL DEFAULT 0", "worker_pid": "INTEGER",
+                  "result_sha256": "TEXT", "checksums": "TEXT"}
 
 
 @dataclass
@@ -77,11 +84,15 @@ class Job:
     run_token: str | None
     error: dict | None
     summary: dict | None
+    restarts: int = 0  # server restarts that interrupted a run (not held against the job)
+    worker_pid: int | None = None  # process of the current or last run
+    result_sha256: str | None = None  # digest of the canonical result file
+    checksums: dict | None = None  # digests of the rendered result files, by format
 
     @classmethod
     def from_row(cls, row: sqlite3.Row) -> Job:
         values = dict(row)
-        for key in ("params", "error", "summary"):
+        for key in ("params", "error", "summary", "checksums"):
             if values[key] is not None:
                 values[key] = json.loads(values[key])
         return cls(**values)
@@ -180,6 +191,10 @@ class JobStore:
             if mode.lower() != "wal":
                 raise RuntimeError(f"{self.db_path}: SQLite refused WAL mode (got {mode!r})")
             conn.executescript(_SCHEMA)
+            present = {r[1] for r in conn.execute("PRAGMA table_info(jobs)").fetchall()}
+            for name, definition in _ADDED_COLUMNS.items():
+                if name not in present:
+                    conn.execute(f"ALTER TABLE jobs ADD COLUMN {name} {definition}")
             conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
 
     def ping(self) -> bool:
@@ -191,12 +206,14 @@ class JobStore:
         except sqlite3.Error:
             return False
 
-    def requeue_interrupted(self, max_attempts: int, error: dict,
+    def requeue_interrupted(self, max_restarts: int, error: dict,
                             ttl: float | None = None) -> tuple[int, int]:
         """After a restart: put jobs left ``running`` back in the queue.
 
-        A job that already used ``max_attempts`` runs is marked failed with ``error`` instead
-        (kept for ``ttl`` seconds), so a job that kills its worker cannot loop forever.
+        The interrupted run is not an attempt of the job (the server stopped, not the job's
+        worker): it is counted in ``restarts`` instead, and a job interrupted by
+        ``max_restarts`` restarts is marked failed with ``error`` (kept for ``ttl``
+        seconds), so a job that takes the whole server down cannot loop forever.
 
         Returns
         -------
@@ -204,11 +221,13 @@ class JobStore:
         """
         now = time.time()
         with self._transaction() as conn:
+            conn.execute("UPDATE jobs SET restarts = restarts + 1, "
+                         "attempts = MAX(attempts - 1, 0) WHERE status = ?", (RUNNING,))
             failed = conn.execute(
                 "UPDATE jobs SET status = ?, finished_at = ?, expires_at = ?, error = ?, "
-                "run_token = NULL WHERE status = ? AND attempts >= ?",
+                "run_token = NULL WHERE status = ? AND restarts >= ?",
                 (FAILED, now, None if ttl is None else now + ttl, json.dumps(error), RUNNING,
-                 max_attempts)).rowcount
+                 max_restarts)).rowcount
             requeued = conn.execute(
                 "UPDATE jobs SET status = ?, progress = 0, run_token = NULL WHERE status = ?",
                 (QUEUED, RUNNING)).rowcount
@@ -384,13 +403,15 @@ class JobStore:
 
     # -- worker side -------------------------------------------------------------------------
 
-    def claim(self, job_id: str, run_token: str) -> Job | None:
-        """Move a queued job to running under ``run_token``; ``None`` if it is not queued."""
+    def claim(self, job_id: str, run_token: str, worker_pid: int | None = None) -> Job | None:
+        """Move a queued job to running under ``run_token`` in process ``worker_pid``;
+        ``None`` if it is not queued."""
         with self._transaction() as conn:
             changed = conn.execute(
                 "UPDATE jobs SET status = ?, started_at = ?, progress = 0, "
-                "attempts = attempts + 1, run_token = ? WHERE id = ? AND status = ?",
-                (RUNNING, time.time(), run_token, job_id, QUEUED)).rowcount
+                "attempts = attempts + 1, run_token = ?, worker_pid = ? "
+                "WHERE id = ? AND status = ?",
+                (RUNNING, time.time(), run_token, worker_pid, job_id, QUEUED)).rowcount
             row = conn.execute("SELECT * FROM jobs WHERE id = ?", (job_id,)).fetchone()
         return Job.from_row(row) if changed else None
 

@@ -27,6 +27,7 @@ from .problem_types import ProblemError
 from .result_files import CANONICAL_RESULT, save_canonical, write_result
 from .storage_errors import storage_problem
 from .store import CANCELLED, FAILED, SUCCEEDED, JobStore
+from .sync_cost import sync_cost_problem
 
 log = logging.getLogger("service.worker")
 
@@ -215,7 +216,7 @@ def run_job(db_path: str, jobs_dir: str, job_id: str, run_token: str, options: d
         The status this run left the job in, or ``"skipped"`` if it was no longer queued.
     """
     store = JobStore(db_path, options.get("busy_timeout", 30.0))
-    job = store.claim(job_id, run_token)
+    job = store.claim(job_id, run_token, os.getpid())
     if job is None:
         return "skipped"
     folder = Path(jobs_dir) / job_id
@@ -279,13 +280,14 @@ def check_point_limit(n_points: int, max_points: int | None) -> None:
 
 
 def run_sync(input_path: str, kind: str, display_name: str | None, params: dict, fmt: str,
-             out_dir: str, max_points: int, workers: int) -> str:
+             out_dir: str, max_points: int, workers: int, max_cost: float = float("inf")) -> str:
     """Compute a small cloud right away and write the result in ``fmt``; return its path.
 
     Raises
     ------
     ProblemError
-        Bad file, bad cloud, bad parameters, or more than ``max_points`` points.
+        Bad file, bad cloud, bad parameters, more than ``max_points`` points, or more work
+        than ``max_cost`` units (:mod:`service.sync_cost`).
     """
     cloud = load_input(Path(input_path), kind, display_name)
     check_cloud(cloud)
@@ -293,6 +295,9 @@ def run_sync(input_path: str, kind: str, display_name: str | None, params: dict,
         raise ProblemError("too-many-points",
                            f"the cloud has {len(cloud.points)} points; synchronous answers "
                            f"are limited to {max_points}; submit it to POST /v1/jobs")
+    too_costly = sync_cost_problem(params, len(cloud.points), max_cost)
+    if too_costly is not None:
+        raise ProblemError("too-costly", too_costly)
     try:
         result = compute(cloud, params, workers)
         target = Path(out_dir) / f"result.{fmt}"

@@ -74,7 +74,8 @@ def job_view(job: JobRecord) -> Job:
         method=job.params.get("method", ""), params=job.params,
         input=JobInput(kind=job.input_kind, filename=job.input_name, format=job.input_format,
                        bytes=job.input_bytes),
-        n_points=job.n_points, attempts=job.attempts, created_at=timestamp(job.created_at),
+        n_points=job.n_points, attempts=job.attempts, restarts=job.restarts,
+        created_at=timestamp(job.created_at),
         started_at=timestamp(job.started_at), finished_at=timestamp(job.finished_at),
         expires_at=timestamp(job.expires_at),
         error=JobError(**job.error) if job.error else None, result=result, links=links)

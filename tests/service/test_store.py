@@ -58,21 +58,24 @@ def test_claim_progress_finish(store):
 def test_restart_requeues_running_jobs_and_fences_the_old_run(store):
     job_id = add(store)
     store.claim(job_id, "old-run")
-    assert store.requeue_interrupted(max_attempts=3, error=ERROR) == (1, 0)
+    assert store.requeue_interrupted(max_restarts=3, error=ERROR) == (1, 0)
     assert store.get(job_id).status == "queued"
     # The orphaned old run can no longer write anything.
     assert not store.report_progress(job_id, "old-run", 0.9)
     assert not store.finish(job_id, "old-run", status="succeeded", ttl=60)
-    assert store.claim(job_id, "new-run").attempts == 2
+    # The restart is counted apart: it is not an attempt of the job.
+    job = store.claim(job_id, "new-run")
+    assert job.attempts == 1 and job.restarts == 1
 
 
-def test_job_failing_too_often_is_not_requeued_forever(store):
+def test_job_interrupted_by_too_many_restarts_is_not_requeued_forever(store):
     job_id = add(store)
     for attempt in range(3):
         store.claim(job_id, f"run-{attempt}")
-        store.requeue_interrupted(max_attempts=3, error=ERROR)
+        store.requeue_interrupted(max_restarts=3, error=ERROR)
     job = store.get(job_id)
-    assert job.status == "failed" and job.error == ERROR and job.attempts == 3
+    assert job.status == "failed" and job.error == ERROR
+    assert job.restarts == 3 and job.attempts == 0
 
 
 def test_requeue_after_worker_crash(store):

@@ -1,0 +1,130 @@
+"""Abuse and fault cases of issue 18, one test per finding (kept fast: seconds each).
+
+Each test fails on the service as it was before the issue: sync requests without a time
+limit, a pool-wide crash charging every job, restarts counted as attempts, a read-only store
+answering 500, unchecked result files, bombs in NPY/NPZ members, keys in access logs.
+"""
+
+from __future__ import annotations
+
+import time
+
+import httpx
+import numpy as np
+import pytest
+from service_helpers import KEY_A, ServerProcess, changed_executor, changed_settings, sphere
+from test_limits import assert_problem
+
+# EGG with 1000 candidates: inside the schema's bounds, minutes of work on a few thousand
+# points (every candidate is tested against every nearer one, at 14 alpha levels).
+EXPLOSIVE_EGG = {"method": "egg", "candidates": 1000}
+
+
+def _metric(text: str, name: str, **labels: str) -> float:
+    want = ",".join(f'{k}="{v}"' for k, v in sorted(labels.items()))
+    for line in text.splitlines():
+        if line.startswith(f"{name}{{{want}}} ") or (not labels and line.startswith(name + " ")):
+            return float(line.rsplit(" ", 1)[1])
+    return 0.0
+
+
+# -- finding 1: synchronous requests are bounded ----------------------------------------------
+
+def test_sync_explosive_parameters_are_refused_before_any_work(client):
+    body = {"points": sphere(2000).tolist(), "params": EXPLOSIVE_EGG}
+    problem = assert_problem(client.post("/v1/curvature", json=body), 413, "too-costly")
+    assert "candidates" in problem["detail"] and "POST /v1/jobs" in problem["detail"]
+    # The same request as a job is accepted (jobs have their own time limit).
+    job = client.post("/v1/jobs", json=body)
+    assert job.status_code == 202
+    client.delete(f"/v1/jobs/{job.json()['id']}")
+
+
+def test_sync_past_its_time_limit_is_killed_and_the_lane_recovers(client):
+    lane = client.app.state.executor.sync_lane
+    before = set(lane.pids())
+    body = {"points": sphere(3000).tolist(), "params": EXPLOSIVE_EGG}
+    with changed_settings(client, sync_max_cost=1e18), \
+            changed_executor(client, sync_time_limit_seconds=1.0):
+        problem = assert_problem(client.post("/v1/curvature", json=body), 422, "time-limit")
+    assert "CURVATURE_SYNC_TIME_LIMIT_SECONDS" in problem["detail"]
+    assert before.isdisjoint(lane.pids()) or not before  # the slot's process was replaced
+    small = client.post("/v1/curvature", json={"points": sphere(200).tolist()})
+    assert small.status_code == 200, small.text
+    assert _metric(client.get("/metrics").text, "curvature_sync_stopped_total",
+                   reason="time-limit") >= 1
+
+
+def test_sync_request_is_killed_when_its_client_hangs_up(tmp_path):
+    server = ServerProcess(tmp_path / "data", tmp_path / "server.log", api_key=KEY_A,
+                           api_keys=KEY_A, sync_max_cost=1e18, warmup="false").start()
+    try:
+        body = {"points": sphere(3000).tolist(), "params": EXPLOSIVE_EGG}
+        with pytest.raises(httpx.ReadTimeout):
+            server.client.post("/v1/curvature", json=body, timeout=2.0)
+        deadline = time.monotonic() + 30
+        while _metric(server.client.get("/metrics").text, "curvature_sync_stopped_total",
+                      reason="disconnect") < 1:
+            assert time.monotonic() < deadline, server.log()
+            time.sleep(0.2)
+        # The lane answers the next request (its slot was replaced, not left computing).
+        small = server.client.post("/v1/curvature", json={"points": sphere(200).tolist()})
+        assert small.status_code == 200, small.text
+    finally:
+        server.stop()
+
+
+def test_sync_cost_grows_with_candidates_and_rounds():
+    from service.sync_cost import cost_per_point
+
+    base = {"method": "tc", "candidates": 30, "beta_min": 1.0, "beta_max": 2.0,
+            "beta_step": 0.1, "min_neighbors": 10}
+    assert cost_per_point({**base, "candidates": 60}) == 4 * cost_per_point(base)
+    assert cost_per_point({**base, "min_neighbors": 60}) == 5 * cost_per_point(base)
+    egg = {"method": "egg", "candidates": 30, "alpha_start": 0.7, "alpha_step": 0.05,
+           "min_neighbors": 10}
+    assert cost_per_point(egg) == 900 * 14
+    assert np.isclose(cost_per_point({**egg, "alpha_step": 0.001}), 900 * 700)
+
+
+# -- finding 2: a dying worker charges only its own job -----------------------------------------
+
+def _running_pid(client, job_id: str, not_pid: int | None = None, timeout: float = 60.0) -> int:
+    """The worker pid of a job once it runs (in a process other than ``not_pid``)."""
+    store = client.app.state.store
+    deadline = time.monotonic() + timeout
+    while True:
+        job = store.get(job_id)
+        if job.status == "running" and job.worker_pid not in (None, not_pid):
+            return job.worker_pid
+        assert time.monotonic() < deadline, f"job {job_id} not running: {job.status}"
+        time.sleep(0.02)
+
+
+def test_killed_worker_charges_and_quarantines_only_its_own_job(client):
+    import os
+    import signal
+
+    from service_helpers import wait_for_job
+    from test_limits import npy_upload
+
+    with changed_executor(client, max_attempts=2):
+        victim = npy_upload(client, 400_000, seed=1).json()["id"]
+        bystander = npy_upload(client, 400_000, seed=2).json()["id"]
+        pid = None
+        for _ in range(2):
+            pid = _running_pid(client, victim, not_pid=pid)
+            _running_pid(client, bystander)
+            os.kill(pid, signal.SIGKILL)
+            time.sleep(0.5)  # let the executor see the crash before looking again
+            if client.app.state.store.get(victim).status == "failed":
+                break
+        failed = wait_for_job(client, victim, timeout=60)
+        survived = wait_for_job(client, bystander, timeout=120)
+    assert failed["status"] == "failed", failed
+    assert failed["error"]["type"] == "/problems/worker-crashed"
+    assert "quarantined" in failed["error"]["detail"] and "2 time(s)" in failed["error"]["detail"]
+    assert failed["attempts"] == 2
+    # The bystander's worker was stopped by the pool, not by its own fault: not charged.
+    assert survived["status"] == "succeeded", survived
+    assert survived["attempts"] == 1
