@@ -32,8 +32,26 @@ def add(store: JobStore, owner: str = "me") -> str:
 def test_wal_mode_and_schema(store):
     conn = sqlite3.connect(store.db_path)
     assert conn.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
-    assert conn.execute("PRAGMA user_version").fetchone()[0] == 1
+    assert conn.execute("PRAGMA user_version").fetchone()[0] == 2
     conn.close()
+
+
+def test_a_version_1_store_gets_the_new_columns(tmp_path):
+    import service.store as store_module
+
+    path = tmp_path / "old.sqlite3"
+    conn = sqlite3.connect(path)
+    old_schema = store_module._SCHEMA.split("    restarts INTEGER")[0].rstrip().rstrip(",")
+    conn.executescript(old_schema + "\n);")
+    conn.execute("INSERT INTO jobs (id, owner, status, params, input_kind, input_file, "
+                 "input_bytes, created_at) VALUES ('j', 'o', 'queued', '{}', 'arrays', "
+                 "'input.npz', 1, 0)")
+    conn.commit()
+    conn.close()
+    old = JobStore(path)
+    old.initialize()
+    job = old.get("j")
+    assert job.restarts == 0 and job.result_sha256 is None and job.checksums is None
 
 
 def test_insert_is_durable_and_queued(store):
