@@ -406,8 +406,11 @@ class LocalPoolExecutor:
         finally:
             self._sync_pending -= 1
 
-    async def render(self, job_dir: Path, fmt: str) -> str:
-        return await self.call(result_files.render, str(job_dir), fmt)
+    async def render(self, job_dir: Path, fmt: str, canonical_sha256: str | None = None,
+                     expected: str | None = None) -> tuple[str, str]:
+        """:func:`result_files.render` in the pool: path and digest of the file."""
+        return await self.call(result_files.render, str(job_dir), fmt, canonical_sha256,
+                               expected)
 
 
 def _terminate(pool: ProcessPoolExecutor, grace: float = 2.0, kill: bool = False) -> None:

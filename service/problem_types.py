@@ -74,6 +74,12 @@ _TYPES = [
     ProblemType("store-busy", 503, "Job store busy",
                 "The job store stayed locked longer than its timeout; nothing was changed. "
                 "Retry after Retry-After seconds."),
+    ProblemType("store-read-only", 503, "Job store read-only",
+                "The job store or the data folder cannot be written (read-only file system or "
+                "file); nothing was changed. Retry after Retry-After seconds."),
+    ProblemType("result-corrupt", 503, "Result corrupt",
+                "A stored result file failed its checksum or is missing; the job is computed "
+                "again from its kept input. Retry after Retry-After seconds."),
     ProblemType("insufficient-storage", 507, "Insufficient storage",
                 "The server's disk is full; nothing was stored. Retry later."),
     ProblemType("time-limit", 422, "Time limit exceeded",

@@ -54,6 +54,7 @@ CREATE TABLE IF NOT EXISTS jobs (
 CREATE INDEX IF NOT EXISTS jobs_owner_seq ON jobs (owner, seq);
 CREATE INDEX IF NOT EXISTS jobs_status_seq ON jobs (status, seq);
 CREATE INDEX IF NOT EXISTS jobs_expires ON jobs (expires_at);
+CREATE TABLE IF NOT EXISTS write_probe (id INTEGER PRIMARY KEY, at REAL NOT NULL);
 """
 # Columns added after version 1, with their definitions, for stores created before them.
 _ADDED_COLUMNS = {"restarts": "INTEGER NOT NULL DEFAULT 0", "worker_pid": "INTEGER",
@@ -202,6 +203,16 @@ class JobStore:
         try:
             with self._conn() as conn:
                 conn.execute("SELECT 1 FROM jobs LIMIT 1").fetchall()
+            return True
+        except sqlite3.Error:
+            return False
+
+    def writable(self) -> bool:
+        """True when the database takes a write (a read-only file or mount does not)."""
+        try:
+            with self._transaction() as conn:
+                conn.execute("INSERT OR REPLACE INTO write_probe (id, at) VALUES (1, ?)",
+                             (time.time(),))
             return True
         except sqlite3.Error:
             return False
@@ -429,16 +440,49 @@ class JobStore:
                          (n_points, job_id, run_token))
 
     def finish(self, job_id: str, run_token: str, *, status: str, ttl: float,
-               error: dict | None = None, summary: dict | None = None) -> bool:
-        """Record the outcome of a run; False when the run no longer owns the job."""
+               error: dict | None = None, summary: dict | None = None,
+               result_sha256: str | None = None) -> bool:
+        """Record the outcome of a run (with the digest of its canonical result file);
+        False when the run no longer owns the job."""
         now = time.time()
         with self._transaction() as conn:
             changed = conn.execute(
                 "UPDATE jobs SET status = ?, progress = CASE WHEN ? THEN 1.0 ELSE progress END, "
-                "finished_at = ?, expires_at = ?, error = ?, summary = ? "
-                "WHERE id = ? AND run_token = ? AND status = ?",
+                "finished_at = ?, expires_at = ?, error = ?, summary = ?, result_sha256 = ?, "
+                "checksums = NULL WHERE id = ? AND run_token = ? AND status = ?",
                 (status, status == SUCCEEDED, now, now + ttl,
                  None if error is None else json.dumps(error),
-                 None if summary is None else json.dumps(summary),
+                 None if summary is None else json.dumps(summary), result_sha256,
                  job_id, run_token, RUNNING)).rowcount
         return changed > 0
+
+    def set_checksum(self, job_id: str, fmt: str, digest: str) -> None:
+        """Record the digest of a rendered result file of a succeeded job."""
+        with self._transaction() as conn:
+            row = conn.execute("SELECT checksums FROM jobs WHERE id = ? AND status = ?",
+                               (job_id, SUCCEEDED)).fetchone()
+            if row is None:
+                return
+            checksums = json.loads(row[0]) if row[0] else {}
+            checksums[fmt] = digest
+            conn.execute("UPDATE jobs SET checksums = ? WHERE id = ?",
+                         (json.dumps(checksums), job_id))
+
+    def fail_lost(self, job_id: str, error: dict) -> bool:
+        """Mark a succeeded job failed with ``error``: its result and input are both lost."""
+        with self._transaction() as conn:
+            return conn.execute("UPDATE jobs SET status = ?, error = ?, summary = NULL "
+                                "WHERE id = ? AND status = ?",
+                                (FAILED, json.dumps(error), job_id, SUCCEEDED)).rowcount > 0
+
+    def requeue_for_recompute(self, job_id: str) -> bool:
+        """Put a succeeded job whose result was lost back in the queue (its input is kept).
+
+        Its attempts start over: the loss was the storage's fault, not the job's.
+        """
+        with self._transaction() as conn:
+            return conn.execute(
+                "UPDATE jobs SET status = ?, progress = 0, finished_at = NULL, "
+                "expires_at = NULL, summary = NULL, result_sha256 = NULL, checksums = NULL, "
+                "attempts = 0, run_token = NULL WHERE id = ? AND status = ?",
+                (QUEUED, job_id, SUCCEEDED)).rowcount > 0

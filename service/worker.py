@@ -235,12 +235,13 @@ def run_job(db_path: str, jobs_dir: str, job_id: str, run_token: str, options: d
         if reporter.aborted:
             raise JobAborted(job_id)
         reporter(_ESTIMATED, force=True)
-        save_canonical(result, folder / CANONICAL_RESULT)
+        digest = save_canonical(result, folder / CANONICAL_RESULT)
         summary = summarize(result, cloud, time.perf_counter() - started)
-        if not store.finish(job_id, run_token, status=SUCCEEDED, ttl=ttl, summary=summary):
+        if not store.finish(job_id, run_token, status=SUCCEEDED, ttl=ttl, summary=summary,
+                            result_sha256=digest):
             raise JobAborted(job_id)
-        # The result holds points and faces, so the input is no longer needed.
-        (folder / job.input_file).unlink(missing_ok=True)
+        # The input is kept until the job expires: a result lost or corrupted on disk is
+        # computed again from it.
         return SUCCEEDED
     except JobAborted:
         (folder / CANONICAL_RESULT).unlink(missing_ok=True)

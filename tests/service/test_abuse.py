@@ -128,3 +128,114 @@ def test_killed_worker_charges_and_quarantines_only_its_own_job(client):
     # The bystander's worker was stopped by the pool, not by its own fault: not charged.
     assert survived["status"] == "succeeded", survived
     assert survived["attempts"] == 1
+
+
+# -- finding 5: a read-only store, corrupt and missing results ---------------------------------
+
+class ReadOnlyStore:
+    """Wraps the app's store so its connections open the database read-only (as on a
+    read-only mount; chmod does not stop root)."""
+
+    def __new__(cls, store):
+        import sqlite3
+        from contextlib import contextmanager
+
+        from service.store import JobStore
+
+        class _ReadOnly(JobStore):
+            @contextmanager
+            def _conn(self):
+                conn = sqlite3.connect(f"file:{self.db_path}?mode=ro", uri=True,
+                                       isolation_level=None, check_same_thread=False)
+                conn.row_factory = sqlite3.Row
+                try:
+                    yield conn
+                finally:
+                    conn.close()
+
+        return _ReadOnly(store.db_path, store.busy_timeout)
+
+
+@pytest.fixture
+def read_only_store(client):
+    original = client.app.state.store
+    done = client.post("/v1/jobs", json={"points": sphere(100).tolist()}).json()
+    client.app.state.store = ReadOnlyStore(original)
+    yield done["id"]
+    client.app.state.store = original
+
+
+def test_read_only_store_fails_readiness_and_answers_503(client, read_only_store):
+    ready = client.get("/readyz")
+    assert ready.status_code == 503 and ready.json()["checks"]["store"] is False
+    folders = set((client.app.state.settings.jobs_dir).iterdir())
+    problem = assert_problem(client.post("/v1/jobs", json={"points": sphere(50).tolist()}),
+                             503, "store-read-only")
+    assert "Retry-After" in client.post("/v1/jobs", json={"points": sphere(50).tolist()}
+                                        ).headers
+    assert "cannot be written" in problem["detail"]
+    assert set(client.app.state.settings.jobs_dir.iterdir()) == folders  # nothing left
+    assert_problem(client.delete(f"/v1/jobs/{read_only_store}"), 503, "store-read-only")
+
+
+def _succeeded_job(client) -> dict:
+    from service_helpers import wait_for_job
+
+    job = client.post("/v1/jobs", json={"points": sphere(150).tolist()}).json()
+    job = wait_for_job(client, job["id"])
+    assert job["status"] == "succeeded"
+    return job
+
+
+@pytest.mark.parametrize("fmt", ["npz", "ply"])
+def test_corrupt_result_is_a_problem_and_the_job_is_computed_again(client, fmt):
+    from service_helpers import wait_for_job
+
+    job = _succeeded_job(client)
+    folder = client.app.state.settings.jobs_dir / job["id"]
+    good = client.get(f"/v1/jobs/{job['id']}/result?format={fmt}")
+    assert good.status_code == 200
+    # Flip bytes in the middle of the canonical result (same size: a silent corruption).
+    canonical = folder / "result.npz"
+    data = bytearray(canonical.read_bytes())
+    data[len(data) // 2: len(data) // 2 + 16] = bytes(16)
+    canonical.write_bytes(bytes(data))
+    if fmt != "npz":
+        (folder / f"result.{fmt}").unlink()  # not rendered yet: must come from the canonical
+    problem = assert_problem(client.get(f"/v1/jobs/{job['id']}/result?format={fmt}"), 503,
+                             "result-corrupt")
+    assert "checksum" in problem["detail"] and "compute it again" in problem["detail"]
+    again = wait_for_job(client, job["id"])
+    assert again["status"] == "succeeded"
+    fresh = client.get(f"/v1/jobs/{job['id']}/result?format={fmt}")
+    assert fresh.status_code == 200
+    if fmt == "npz":  # the same numbers (the info member holds timings)
+        import io
+
+        with np.load(io.BytesIO(good.content)) as a, np.load(io.BytesIO(fresh.content)) as b:
+            for key in set(a.files) - {"info"}:
+                np.testing.assert_array_equal(a[key], b[key])
+    else:
+        assert fresh.content == good.content
+
+
+def test_corrupt_rendered_file_is_rendered_again(client):
+    job = _succeeded_job(client)
+    good = client.get(f"/v1/jobs/{job['id']}/result?format=csv")
+    path = client.app.state.settings.jobs_dir / job["id"] / "result.csv"
+    path.write_bytes(path.read_bytes()[:100])  # truncated
+    again = client.get(f"/v1/jobs/{job['id']}/result?format=csv")
+    assert again.status_code == 200 and again.content == good.content
+
+
+def test_missing_result_of_a_succeeded_job_is_not_job_not_found(client):
+    from service_helpers import wait_for_job
+
+    job = _succeeded_job(client)
+    folder = client.app.state.settings.jobs_dir / job["id"]
+    for path in folder.glob("result.*"):
+        path.unlink()
+    assert_problem(client.get(f"/v1/jobs/{job['id']}/result?format=json"), 503,
+                   "result-corrupt")
+    assert wait_for_job(client, job["id"])["status"] == "succeeded"
+    assert client.get(f"/v1/jobs/{job['id']}/result?format=json").status_code == 200
