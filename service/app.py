@@ -17,6 +17,7 @@ from .auth import is_loopback, load_keyring
 from .cleanup import BusyFolders, cleanup_loop, sweep
 from .executor import create_executor
 from .metrics import RequestMetricsMiddleware, ServiceMetrics
+from .middleware import HygieneMiddleware, install_log_redaction
 from .problem_types import PROBLEM_TYPES, ProblemError
 from .problems import PROBLEM_MEDIA_TYPE
 from .routes import curvature as curvature_routes
@@ -147,6 +148,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.keyring = None
     app.state.busy_folders = BusyFolders()
     problems.install(app)
+    # Outside the catch-all, so its 500s get the headers too.
+    app.add_middleware(HygieneMiddleware, router=app)
+    install_log_redaction()
     # Added last = outermost: it also counts the 500s the catch-all produces.
     app.add_middleware(RequestMetricsMiddleware, metrics=app.state.metrics)
     for module in (jobs, preview, curvature_routes, methods, health, problem_routes, ui):

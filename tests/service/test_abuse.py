@@ -239,3 +239,64 @@ def test_missing_result_of_a_succeeded_job_is_not_job_not_found(client):
                    "result-corrupt")
     assert wait_for_job(client, job["id"])["status"] == "succeeded"
     assert client.get(f"/v1/jobs/{job['id']}/result?format=json").status_code == 200
+
+
+# -- finding 7: headers, Allow, keys out of logs, the schema says what is accepted --------------
+
+def test_security_headers_on_every_response(client):
+    for response in (client.get("/healthz"), client.get("/v1/jobs"),
+                     client.get("/v1/jobs/nope"), client.post("/v1/jobs", content=b"x"),
+                     client.get("/nowhere")):
+        assert response.headers["x-content-type-options"] == "nosniff", response.url
+        assert "cache-control" in response.headers, response.url
+
+
+def test_options_and_405_name_every_method_of_the_path(client):
+    options = client.options("/v1/jobs")
+    assert options.status_code == 204
+    assert set(options.headers["allow"].split(", ")) == {"GET", "POST", "OPTIONS"}
+    not_allowed = client.put("/v1/jobs")
+    assert not_allowed.status_code == 405
+    assert {"GET", "POST"} <= set(not_allowed.headers["allow"].split(", "))
+    one = client.options("/v1/jobs/abc")
+    assert {"GET", "DELETE"} <= set(one.headers["allow"].split(", "))
+    assert client.options("/nowhere").status_code == 404
+
+
+def test_query_string_values_never_reach_the_access_log():
+    import logging
+
+    from service.middleware import RedactQueryFilter, redact_query
+
+    record = logging.LogRecord("uvicorn.access", logging.INFO, __file__, 1,
+                               '%s - "%s %s HTTP/%s" %d',
+                               ("127.0.0.1:5", "GET", "/v1/jobs?api_key=SECRETKEY&limit=5",
+                                "1.1", 401), None)
+    RedactQueryFilter().filter(record)
+    line = record.getMessage()
+    assert "SECRETKEY" not in line and "limit=5" in line and "api_key=REDACTED" in line
+    assert redact_query("/v1/jobs") == "/v1/jobs"
+    assert "hunter2" not in redact_query("/x?token=hunter2&format=ply")
+    assert "format=ply" in redact_query("/x?token=hunter2&format=ply")
+
+
+def test_schema_refuses_what_the_server_refuses(client):
+    import json
+
+    import jsonschema_rs  # installed with schemathesis
+
+    spec = client.get("/openapi.json").json()
+    cloud = spec["components"]["schemas"]["CloudRequest"]
+    # Refs point into #/components/schemas: validate against a document that has them.
+    doc = json.loads(json.dumps({"components": spec["components"], **cloud}))
+    validator = jsonschema_rs.Draft202012Validator(doc)
+    points = sphere(20).tolist()
+    bad = [{"points": points, "normals": []},
+           {"points": points, "params": {"method": "knn", "fit": "nfr", "solver": "taubin"}},
+           {"points": points, "params": {"method": "knn", "fit": "monge",
+                                         "solver": "algebraic"}}]
+    for body in bad:
+        assert not validator.is_valid(body), body
+        assert client.post("/v1/jobs", json=body).status_code == 422
+    good = {"points": points, "params": {"method": "knn", "solver": "algebraic"}}
+    assert validator.is_valid(good)
