@@ -22,6 +22,7 @@ from python_multipart.multipart import MultipartParser, parse_options_header
 from starlette.requests import ClientDisconnect
 
 from .formats import INPUT_EXTENSIONS, extension_of
+from .input_guard import check_numpy_file
 from .inputs import CloudInput, check_cloud
 from .problem_types import ProblemError
 from .problems import HTTPProblem, validation_errors
@@ -123,7 +124,7 @@ async def receive_cloud(request: Request, folder: Path, settings: Settings) -> R
     try:
         if content_type == b"multipart/form-data":
             return await _receive_multipart(request, folder, options.get(b"boundary"),
-                                            settings.max_upload_bytes)
+                                            settings.max_upload_bytes, settings.max_points)
         if content_type == b"application/json" or content_type.endswith(b"+json"):
             return await _receive_json(request, folder, settings.max_json_bytes)
     except ClientDisconnect:
@@ -225,7 +226,7 @@ class _MultipartSink:
 
 
 async def _receive_multipart(request: Request, folder: Path, boundary: bytes | None,
-                             limit: int) -> ReceivedInput:
+                             limit: int, max_points: int | None = None) -> ReceivedInput:
     _check_declared_length(request, limit)
     if not boundary:
         raise HTTPProblem("malformed-request", "multipart/form-data without a boundary")
@@ -265,6 +266,11 @@ async def _receive_multipart(request: Request, folder: Path, boundary: bytes | N
     ext = extension_of(sink.filename)
     input_file = f"input.{ext}"
     (folder / UPLOAD_PART).replace(folder / input_file)
+    try:  # cheap: headers and the zip directory only
+        await anyio.to_thread.run_sync(check_numpy_file, folder / input_file, sink.filename,
+                                       max_points)
+    except ProblemError as exc:
+        raise HTTPProblem(exc.slug, exc.detail) from None
     return ReceivedInput(kind="file", input_file=input_file, filename=sink.filename,
                          format=ext, size=sink.file_bytes, params=params)
 

@@ -225,7 +225,8 @@ def run_job(db_path: str, jobs_dir: str, job_id: str, run_token: str, options: d
     ttl = options["result_ttl"]
     started = time.perf_counter()
     try:
-        cloud = load_input(folder / job.input_file, job.input_kind, job.input_name)
+        cloud = load_input(folder / job.input_file, job.input_kind, job.input_name,
+                           options.get("max_points"))
         check_cloud(cloud)
         store.set_points(job_id, run_token, len(cloud.points))
         check_point_limit(len(cloud.points), options.get("max_points"))
@@ -290,7 +291,7 @@ def run_sync(input_path: str, kind: str, display_name: str | None, params: dict,
         Bad file, bad cloud, bad parameters, more than ``max_points`` points, or more work
         than ``max_cost`` units (:mod:`service.sync_cost`).
     """
-    cloud = load_input(Path(input_path), kind, display_name)
+    cloud = load_input(Path(input_path), kind, display_name, max_points)
     check_cloud(cloud)
     if len(cloud.points) > max_points:
         raise ProblemError("too-many-points",

@@ -46,7 +46,7 @@ async def client_gone(request: Request) -> None:
                                    "malformed-file", "non-finite-coordinates", "too-few-points",
                                    "too-large", "too-many-points", "unknown-format",
                                    "not-acceptable", "queue-full", "insufficient-storage",
-                                   "too-costly", "time-limit")},
+                                   "too-costly", "time-limit", "cloud-too-large")},
 )
 async def curvature_now(
     request: Request,

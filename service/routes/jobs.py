@@ -122,6 +122,7 @@ def _queue_problem(settings: Settings, scope: str, count: int, limit: int) -> HT
     summary="Submit a cloud for curvature estimation",
     responses={202: {"description": "Accepted and queued; Location gives the job's URL."},
                **problem_responses("malformed-request", "invalid-request", "invalid-parameters",
+                                   "malformed-file", "store-read-only",
                                    "non-finite-coordinates", "too-large", "cloud-too-large",
                                    "unknown-format", "too-many-jobs", "queue-full",
                                    "insufficient-storage")},

@@ -300,3 +300,47 @@ def test_schema_refuses_what_the_server_refuses(client):
         assert client.post("/v1/jobs", json=body).status_code == 422
     good = {"points": points, "params": {"method": "knn", "solver": "algebraic"}}
     assert validator.is_valid(good)
+
+
+# -- finding 3: memory bounded before work -------------------------------------------------------
+
+def _upload(client, name: str, payload: bytes):
+    return client.post("/v1/jobs", files={"file": (name, payload)},
+                       data={"params": '{"method": "knn", "k": 5}'})
+
+
+def test_npz_deflate_bomb_is_refused_at_upload(client):
+    import io
+
+    buffer = io.BytesIO()
+    np.savez_compressed(buffer, points=np.zeros((2_000_000, 3)))  # 48 MB in ~50 kB
+    assert len(buffer.getvalue()) < 500_000
+    problem = assert_problem(_upload(client, "bomb.npz", buffer.getvalue()), 422,
+                             "malformed-file")
+    assert "expands" in problem["detail"] and "'points.npy'" in problem["detail"]
+
+
+def test_npy_header_claiming_too_many_points_is_refused_without_reading(client):
+    import io
+
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(
+        header, {"descr": "<f8", "fortran_order": False, "shape": (62_500_000, 3)})
+    payload = header.getvalue() + bytes(4096)  # the header claims 1.5 GB of data
+    with changed_settings(client, max_points=1_000_000):
+        problem = assert_problem(_upload(client, "liar.npy", payload), 413, "cloud-too-large")
+    assert "(62500000, 3)" in problem["detail"]
+
+
+def test_npz_member_header_claiming_too_many_points_is_refused(client):
+    import io
+    import zipfile
+
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(
+        header, {"descr": "<f8", "fortran_order": False, "shape": (62_500_000, 3)})
+    buffer = io.BytesIO()
+    with zipfile.ZipFile(buffer, "w") as archive:
+        archive.writestr("points.npy", header.getvalue() + bytes(1000))
+    with changed_settings(client, max_points=1_000_000):
+        assert_problem(_upload(client, "liar.npz", buffer.getvalue()), 413, "cloud-too-large")
