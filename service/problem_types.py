@@ -69,6 +69,12 @@ _TYPES = [
     ProblemType("too-many-jobs", 429, "Too many jobs",
                 "This API key has too many unfinished jobs; retry after Retry-After seconds, "
                 "or cancel some."),
+    ProblemType("too-many-uploads", 429, "Too many uploads",
+                "This API key has too many uploads in progress at once; retry after "
+                "Retry-After seconds."),
+    ProblemType("request-timeout", 408, "Request timeout",
+                "The request body arrived too slowly (a read timeout or the minimum upload "
+                "rate); send it again on a faster connection."),
     ProblemType("queue-full", 503, "Queue full",
                 "Too many unfinished jobs or waiting requests; retry after Retry-After seconds."),
     ProblemType("store-busy", 503, "Job store busy",

@@ -62,6 +62,16 @@ class Settings(BaseSettings):
         1 << 30, ge=1024, description="Largest accepted request body (file uploads).")
     max_json_bytes: int = Field(
         64 << 20, ge=1024, description="Largest accepted JSON body (parsed in memory).")
+    upload_read_timeout_seconds: float = Field(
+        30, gt=0, description="A request body pausing longer than this is answered 408.")
+    min_upload_bytes_per_second: int = Field(
+        1024, ge=0, description="Past the first read timeout, a body arriving slower than "
+        "this on average is answered 408.")
+    max_concurrent_uploads: int = Field(
+        64, ge=1, description="Uploads in progress at once (503 beyond; also kept below what "
+        "the file descriptor limit allows).")
+    max_uploads_per_key: int = Field(
+        8, ge=1, description="Uploads one API key may have in progress at once (429 beyond).")
     sync_max_points: int = Field(
         50_000, ge=10, description="Largest cloud POST /v1/curvature answers synchronously.")
     sync_time_limit_seconds: float = Field(

@@ -30,6 +30,9 @@ def storage_problem(exc: BaseException, doing: str) -> ProblemError | None:
         return ProblemError("insufficient-storage",
                             f"no space left on the server's disk while {doing}; nothing was "
                             "kept. Retry later.")
+    if isinstance(exc, OSError) and exc.errno in (errno.EMFILE, errno.ENFILE):
+        return ProblemError("queue-full", f"the server has too many open files while {doing}; "
+                            "nothing was kept. Retry later.")
     if isinstance(exc, OSError) and exc.errno in _READ_ONLY:
         return ProblemError("store-read-only", f"the server's data folder is read-only while "
                             f"{doing}; nothing was kept. Retry later.")

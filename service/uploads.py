@@ -28,6 +28,7 @@ from .problem_types import ProblemError
 from .problems import HTTPProblem, validation_errors
 from .schemas import METHOD_MODELS, MethodParams, default_params
 from .settings import Settings
+from .upload_gate import gate_of, timed_stream
 
 _PARAMS_ADAPTER: TypeAdapter = TypeAdapter(MethodParams)
 _MAX_PARAMS_BYTES = 64 * 1024
@@ -111,22 +112,26 @@ def _check_declared_length(request: Request, limit: int) -> None:
                           f"{limit} bytes")
 
 
-async def receive_cloud(request: Request, folder: Path, settings: Settings) -> ReceivedInput:
+async def receive_cloud(request: Request, folder: Path, settings: Settings,
+                        owner: str = "anonymous") -> ReceivedInput:
     """Store the request's cloud in ``folder`` (which must exist) and validate parameters.
 
     Raises
     ------
     HTTPProblem
         413 too large, 415 unknown file format or unsupported media type, 400 malformed body,
-        422 invalid parameters or cloud.
+        422 invalid parameters or cloud, 408 too slow, 429/503 too many uploads at once
+        (:mod:`service.upload_gate`).
     """
     content_type, options = parse_options_header(request.headers.get("content-type"))
     try:
         if content_type == b"multipart/form-data":
-            return await _receive_multipart(request, folder, options.get(b"boundary"),
-                                            settings.max_upload_bytes, settings.max_points)
+            with gate_of(request).hold(owner, settings.retry_after_seconds):
+                return await _receive_multipart(request, folder, options.get(b"boundary"),
+                                                settings)
         if content_type == b"application/json" or content_type.endswith(b"+json"):
-            return await _receive_json(request, folder, settings.max_json_bytes)
+            with gate_of(request).hold(owner, settings.retry_after_seconds):
+                return await _receive_json(request, folder, settings)
     except ClientDisconnect:
         raise HTTPProblem("malformed-request", "the client disconnected during the upload") \
             from None
@@ -226,7 +231,8 @@ class _MultipartSink:
 
 
 async def _receive_multipart(request: Request, folder: Path, boundary: bytes | None,
-                             limit: int, max_points: int | None = None) -> ReceivedInput:
+                             settings: Settings) -> ReceivedInput:
+    limit, max_points = settings.max_upload_bytes, settings.max_points
     _check_declared_length(request, limit)
     if not boundary:
         raise HTTPProblem("malformed-request", "multipart/form-data without a boundary")
@@ -237,7 +243,7 @@ async def _receive_multipart(request: Request, folder: Path, boundary: bytes | N
         raise HTTPProblem("malformed-request", f"bad multipart boundary: {exc}") from None
     received = 0
     try:
-        async for chunk in request.stream():
+        async for chunk in timed_stream(request, settings):
             received += len(chunk)
             if received > limit:
                 raise HTTPProblem("too-large", f"the body exceeds the limit of {limit} bytes")
@@ -277,10 +283,11 @@ async def _receive_multipart(request: Request, folder: Path, boundary: bytes | N
 
 # -- JSON -----------------------------------------------------------------------------------
 
-async def _read_limited(request: Request, limit: int) -> bytes:
+async def _read_limited(request: Request, settings: Settings) -> bytes:
+    limit = settings.max_json_bytes
     _check_declared_length(request, limit)
     body = bytearray()
-    async for chunk in request.stream():
+    async for chunk in timed_stream(request, settings):
         body += chunk
         if len(body) > limit:
             raise HTTPProblem("too-large", f"the JSON body exceeds the limit of {limit} bytes")
@@ -343,8 +350,8 @@ def _decode_cloud(body: bytes, folder: Path) -> tuple[dict, int]:
     return params, len(points)
 
 
-async def _receive_json(request: Request, folder: Path, limit: int) -> ReceivedInput:
-    body = await _read_limited(request, limit)
+async def _receive_json(request: Request, folder: Path, settings: Settings) -> ReceivedInput:
+    body = await _read_limited(request, settings)
     params, n = await anyio.to_thread.run_sync(_decode_cloud, body, folder)
     return ReceivedInput(kind="arrays", input_file="input.npz", filename=None, format="json",
                          size=len(body), params=params, n_points=n)

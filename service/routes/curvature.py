@@ -46,10 +46,12 @@ async def client_gone(request: Request) -> None:
                                    "malformed-file", "non-finite-coordinates", "too-few-points",
                                    "too-large", "too-many-points", "unknown-format",
                                    "not-acceptable", "queue-full", "insufficient-storage",
-                                   "too-costly", "time-limit", "cloud-too-large")},
+                                   "too-costly", "time-limit", "cloud-too-large",
+                                   "too-many-uploads", "request-timeout")},
 )
 async def curvature_now(
     request: Request,
+    owner: Annotated[str, Depends(owner_id)],
     settings: Annotated[Settings, Depends(get_settings)],
     executor: Annotated[LocalPoolExecutor, Depends(get_executor)],
     metrics: Annotated[ServiceMetrics, Depends(get_metrics)],
@@ -72,7 +74,7 @@ async def curvature_now(
     try:
         with request.app.state.busy_folders.hold(name):
             folder.mkdir(parents=True)
-            received = await receive_cloud(request, folder, settings)
+            received = await receive_cloud(request, folder, settings, owner)
             if received.n_points is not None and received.n_points > settings.sync_max_points:
                 raise HTTPProblem("too-many-points", (
                     f"the cloud has {received.n_points} points; synchronous answers are "

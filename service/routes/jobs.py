@@ -123,6 +123,7 @@ def _queue_problem(settings: Settings, scope: str, count: int, limit: int) -> HT
     responses={202: {"description": "Accepted and queued; Location gives the job's URL."},
                **problem_responses("malformed-request", "invalid-request", "invalid-parameters",
                                    "malformed-file", "store-read-only",
+                                   "too-many-uploads", "request-timeout",
                                    "non-finite-coordinates", "too-large", "cloud-too-large",
                                    "unknown-format", "too-many-jobs", "queue-full",
                                    "insufficient-storage")},
@@ -155,7 +156,7 @@ async def submit_job(
     try:
         with request.app.state.busy_folders.hold(job_id):
             folder.mkdir(parents=True)
-            received = await receive_cloud(request, folder, settings)
+            received = await receive_cloud(request, folder, settings, owner)
             if received.n_points is not None and received.n_points > settings.max_points:
                 raise HTTPProblem("cloud-too-large", (
                     f"the cloud has {received.n_points} points; this service accepts at "

@@ -344,3 +344,76 @@ def test_npz_member_header_claiming_too_many_points_is_refused(client):
         archive.writestr("points.npy", header.getvalue() + bytes(1000))
     with changed_settings(client, max_points=1_000_000):
         assert_problem(_upload(client, "liar.npz", buffer.getvalue()), 413, "cloud-too-large")
+
+
+# -- finding 4: slow and piled-up uploads ---------------------------------------------------------
+
+def _stalled_upload(port: int, key: str):
+    """Open a multipart upload, send its head and a first chunk, then stall."""
+    import socket
+
+    boundary = "stall"
+    head = (f"--{boundary}\r\nContent-Disposition: form-data; name=\"file\"; "
+            "filename=\"c.xyz\"\r\n\r\n0 0 0\n").encode()
+    sock = socket.create_connection(("127.0.0.1", port))
+    sock.sendall((f"POST /v1/jobs HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {key}\r\n"
+                  f"Content-Type: multipart/form-data; boundary={boundary}\r\n"
+                  "Content-Length: 1000000\r\n\r\n").encode() + head)
+    return sock
+
+
+def _answer(sock, timeout: float) -> str:
+    sock.settimeout(timeout)
+    data = b""
+    try:
+        while b"\r\n\r\n" not in data:
+            chunk = sock.recv(4096)
+            if not chunk:
+                break
+            data += chunk
+    finally:
+        sock.close()
+    return data.decode("latin-1")
+
+
+def test_stalled_uploads_are_capped_per_key_and_timed_out(tmp_path):
+    from service_helpers import KEY_B, KEYS
+
+    server = ServerProcess(tmp_path / "data", tmp_path / "server.log", api_key=KEY_A,
+                           api_keys=KEYS, warmup="false", max_uploads_per_key=2,
+                           upload_read_timeout_seconds=2).start()
+    try:
+        stalled = [_stalled_upload(server.port, KEY_A) for _ in range(2)]
+        time.sleep(0.5)  # both are being received
+        third = _answer(_stalled_upload(server.port, KEY_A), timeout=10)
+        assert third.startswith("HTTP/1.1 429"), third
+        assert "retry-after" in third.lower()
+        # Another key is not held up by the first key's stalled uploads.
+        other = server.client.post("/v1/jobs", json={"points": sphere(50).tolist()},
+                                   headers={"Authorization": f"Bearer {KEY_B}"})
+        assert other.status_code == 202, other.text
+        # The stalled ones are answered 408 after the read timeout, and leave no job folder.
+        for sock in stalled:
+            assert _answer(sock, timeout=20).startswith("HTTP/1.1 408")
+        folders = list((tmp_path / "data" / "jobs").iterdir())
+        assert [f.name for f in folders] == [other.json()["id"]]
+    finally:
+        server.stop()
+
+
+def test_upload_gate_counts_and_releases():
+    from service.problems import HTTPProblem
+    from service.upload_gate import UploadGate
+
+    gate = UploadGate(max_total=3, max_per_key=2)
+    with gate.hold("a", 5), gate.hold("a", 5):
+        with pytest.raises(HTTPProblem) as per_key:
+            with gate.hold("a", 5):
+                pass
+        assert per_key.value.slug == "too-many-uploads"
+        with gate.hold("b", 5):
+            with pytest.raises(HTTPProblem) as total:
+                with gate.hold("c", 5):
+                    pass
+            assert total.value.slug == "queue-full"
+    assert gate.total == 0 and not gate.per_key
