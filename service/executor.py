@@ -217,8 +217,12 @@ class LocalPoolExecutor:
         free = self.workers - len(self._in_flight)
         if free <= 0 or self._pool is None:
             return
-        ids = await anyio.to_thread.run_sync(self.store.next_queued, free,
-                                             set(self._in_flight))
+        s = self.settings
+        # With two workers or more, one is kept for small jobs (no head-of-line blocking).
+        large_slots = max(1, self.workers - s.small_job_workers)
+        ids = await anyio.to_thread.run_sync(lambda: self.store.next_queued(
+            free, set(self._in_flight), large_bytes=s.small_job_bytes,
+            large_slots=large_slots))
         options = self._options
         for job_id in ids:
             if job_id in self._in_flight:

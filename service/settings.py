@@ -52,6 +52,15 @@ class Settings(BaseSettings):
     workers: int = Field(2, ge=1, le=256, description="Worker processes in the local pool.")
     start_method: Literal["spawn", "forkserver"] = Field(
         DEFAULT_START_METHOD, description="multiprocessing start method of the pool.")
+    small_job_bytes: int = Field(
+        4 << 20, ge=0, description="Jobs whose input is at most this many bytes are small: "
+        "they never wait for a worker behind large ones.")
+    small_job_workers: int = Field(
+        1, ge=0, description="Workers large jobs leave free for small ones (at least one "
+        "worker always takes large jobs).")
+    worker_nice: int = Field(
+        10, ge=0, le=19, description="Scheduling niceness of the worker processes, so the "
+        "server keeps answering (polls, uploads) while they compute.")
     estimate_workers: int = Field(
         1, ge=0, le=256,
         description="Threads each job may use inside the library (0: the library's default).")

@@ -12,6 +12,7 @@ import json
 import sqlite3
 import time
 import uuid
+from collections import Counter
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass
@@ -321,12 +322,42 @@ class JobStore:
         counts.update({r[0]: r[1] for r in rows})
         return counts
 
-    def next_queued(self, limit: int, exclude: set[str]) -> list[str]:
-        """Ids of the oldest queued jobs not in ``exclude`` (already handed to the pool)."""
+    def next_queued(self, limit: int, exclude: set[str], *, large_bytes: int | None = None,
+                    large_slots: int | None = None, window: int = 1000) -> list[str]:
+        """Ids of the queued jobs to run next, not in ``exclude`` (already in the pool).
+
+        Fair share: each pick goes to the owner with the fewest jobs running or picked, the
+        oldest of that owner's jobs first, so one key's backlog does not hold up another's.
+        Size classes: a job of more than ``large_bytes`` input bytes is large, and at most
+        ``large_slots`` large jobs run at once, so a worker stays free for small jobs. Only
+        the ``window`` oldest queued jobs are considered (plain FIFO without the options).
+        """
         with self._conn() as conn:
-            rows = conn.execute("SELECT id FROM jobs WHERE status = ? ORDER BY seq LIMIT ?",
-                                (QUEUED, limit + len(exclude))).fetchall()
-        return [r[0] for r in rows if r[0] not in exclude][:limit]
+            queued = conn.execute(
+                "SELECT id, owner, input_bytes FROM jobs WHERE status = ? ORDER BY seq LIMIT ?",
+                (QUEUED, window + len(exclude))).fetchall()
+            running = conn.execute("SELECT id, owner, input_bytes FROM jobs WHERE status = ?",
+                                   (RUNNING,)).fetchall()
+        busy = {r[0]: r for r in running}
+        busy.update({r[0]: r for r in queued if r[0] in exclude})
+        candidates = [r for r in queued if r[0] not in exclude]
+        if large_bytes is None:
+            return [r[0] for r in candidates[:limit]]
+        share = Counter(r[1] for r in busy.values())
+        large = sum(r[2] > large_bytes for r in busy.values())
+        picked: list[str] = []
+        while candidates and len(picked) < limit:
+            allowed = [r for r in candidates
+                       if large_slots is None or r[2] <= large_bytes or large < large_slots]
+            if not allowed:
+                break
+            fewest = min(share[r[1]] for r in allowed)
+            row = next(r for r in allowed if share[r[1]] == fewest)  # oldest of that share
+            candidates.remove(row)
+            picked.append(row[0])
+            share[row[1]] += 1
+            large += row[2] > large_bytes
+        return picked
 
     def cancel(self, job_id: str, ttl: float) -> Job | None:
         """Mark a queued or running job cancelled; the running worker notices and stops.

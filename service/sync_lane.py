@@ -36,7 +36,8 @@ def new_pool(settings: Settings, workers: int) -> ProcessPoolExecutor:
         context.set_forkserver_preload(["service.worker"])
     return ProcessPoolExecutor(max_workers=workers, mp_context=context,
                                initializer=worker.init_worker,
-                               initargs=(settings.log_level, os.getpid()))
+                               initargs=(settings.log_level, os.getpid(),
+                                         settings.worker_nice))
 
 
 def kill_pool(pool: ProcessPoolExecutor) -> None:

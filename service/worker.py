@@ -8,6 +8,7 @@ callback raises, which aborts ``curvature.estimate``) and record the outcome.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import select
@@ -48,8 +49,10 @@ def time_limit_problem(limit: float) -> ProblemError:
                         "or cheaper parameters")
 
 
-def init_worker(log_level: str = "INFO", server_pid: int | None = None) -> None:
-    """Pool initializer: log to stderr, and exit as soon as the server process is gone.
+def init_worker(log_level: str = "INFO", server_pid: int | None = None,
+                nice: int = 0) -> None:
+    """Pool initializer: log to stderr, lower the priority by ``nice``, and exit as soon as
+    the server process is gone.
 
     A worker must not outlive a killed server: the next server start runs the job again, and
     an orphan would keep burning a core on a result nobody records (the run token would
@@ -57,6 +60,10 @@ def init_worker(log_level: str = "INFO", server_pid: int | None = None) -> None:
     """
     logging.basicConfig(level=log_level.upper(), stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s[%(process)d]: %(message)s")
+    if nice:
+        # Computing at a lower priority than the server keeps polling fast on busy cores.
+        with contextlib.suppress(OSError):
+            os.nice(nice)
     if server_pid is not None:
         threading.Thread(target=_exit_with, args=(server_pid,), name="server-watchdog",
                          daemon=True).start()

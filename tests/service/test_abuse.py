@@ -417,3 +417,38 @@ def test_upload_gate_counts_and_releases():
                     pass
             assert total.value.slug == "queue-full"
     assert gate.total == 0 and not gate.per_key
+
+
+# -- finding 6: small jobs do not wait behind large ones ------------------------------------------
+
+def _queue(store, owner: str, size: int) -> str:
+    from service.store import new_job_id
+
+    job_id = new_job_id()
+    store.insert(job_id=job_id, owner=owner, params={"method": "knn"}, input_kind="file",
+                 input_file="input.npy", input_name="c.npy", input_format="npy",
+                 input_bytes=size, n_points=None)
+    return job_id
+
+
+def test_scheduler_keeps_a_worker_for_small_jobs_and_shares_between_keys(tmp_path):
+    from service.store import JobStore
+
+    store = JobStore(tmp_path / "jobs.sqlite3")
+    store.initialize()
+    big = 100 << 20
+    large = [_queue(store, "a", big) for _ in range(5)]
+    small_a = _queue(store, "a", 2000)
+    small_b = _queue(store, "b", 2000)
+    options = {"large_bytes": 4 << 20, "large_slots": 1}
+    # Two free workers: one large job, and the other worker goes to a small one, of the key
+    # with nothing running (b), not to the next large job of a.
+    first = store.next_queued(2, set(), **options)
+    assert first == [large[0], small_b]
+    store.claim(large[0], "r1")
+    store.claim(small_b, "r2")
+    # b's job done, one worker free again: a's small job goes before its queued large ones.
+    store.finish(small_b, "r2", status="succeeded", ttl=60)
+    assert store.next_queued(1, set(), **options) == [small_a]
+    # Without the options the old FIFO order remains.
+    assert store.next_queued(2, set()) == large[1:3]
