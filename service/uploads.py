@@ -24,6 +24,7 @@ from starlette.requests import ClientDisconnect
 from .formats import INPUT_EXTENSIONS, extension_of
 from .input_guard import check_numpy_file
 from .inputs import CloudInput, check_cloud
+from .json_count import member_rows
 from .problem_types import ProblemError
 from .problems import HTTPProblem, validation_errors
 from .schemas import METHOD_MODELS, MethodParams, default_params
@@ -306,8 +307,18 @@ def _as_array(value: Any, name: str, dtype) -> np.ndarray:
     return arr
 
 
-def _decode_cloud(body: bytes, folder: Path) -> tuple[dict, int]:
-    """Parse, check and store the JSON cloud (runs in a thread: it can be big)."""
+def _decode_cloud(body: bytes, folder: Path, max_points: int | None = None) -> tuple[dict, int]:
+    """Parse, check and store the JSON cloud (runs in a thread: it can be big).
+
+    The points are counted on the raw bytes first (:mod:`service.json_count`): a cloud of
+    more than ``max_points`` is refused before any Python object is built for it.
+    """
+    if max_points is not None:
+        rows = member_rows(body)
+        n = max(rows.get("points", 0), rows.get("normals", 0))
+        if n > max_points:
+            raise HTTPProblem("cloud-too-large", f"the cloud has {n} points; this service "
+                              f"accepts at most {max_points} (CURVATURE_MAX_POINTS)")
     doc = parse_json(body, "malformed-request", "the body")
     if not isinstance(doc, dict):
         raise HTTPProblem("invalid-request", "the body must be a JSON object with 'points'")
@@ -352,6 +363,7 @@ def _decode_cloud(body: bytes, folder: Path) -> tuple[dict, int]:
 
 async def _receive_json(request: Request, folder: Path, settings: Settings) -> ReceivedInput:
     body = await _read_limited(request, settings)
-    params, n = await anyio.to_thread.run_sync(_decode_cloud, body, folder)
+    params, n = await anyio.to_thread.run_sync(_decode_cloud, body, folder,
+                                               settings.max_points)
     return ReceivedInput(kind="arrays", input_file="input.npz", filename=None, format="json",
                          size=len(body), params=params, n_points=n)

@@ -452,3 +452,44 @@ def test_scheduler_keeps_a_worker_for_small_jobs_and_shares_between_keys(tmp_pat
     assert store.next_queued(1, set(), **options) == [small_a]
     # Without the options the old FIFO order remains.
     assert store.next_queued(2, set()) == large[1:3]
+
+
+def test_json_body_above_the_point_limit_is_refused_before_parsing(tmp_path):
+    import json
+    import tracemalloc
+
+    from service import uploads
+    from service.problems import HTTPProblem
+
+    body = b'{"points": [' + b",".join([b"[0,0,0]"] * 3_000_000) + b"]}"  # 24 MB
+    tracemalloc.start()
+    try:
+        with pytest.raises(HTTPProblem) as refused:
+            uploads._decode_cloud(body, tmp_path, max_points=1_000_000)
+        _, peak = tracemalloc.get_traced_memory()
+    finally:
+        tracemalloc.stop()
+    assert refused.value.slug == "cloud-too-large" and "3000000" in refused.value.detail
+    # Parsing it would have taken about 11 bytes per byte (a list per point); the count
+    # takes scratch space of a few bytes per chunk byte, whatever the body's size.
+    assert peak < 10 << 20 < len(body) / 2, peak
+    # Under the limit the same body is parsed and stored as before.
+    small = json.dumps({"points": sphere(50).tolist()}).encode()
+    assert uploads._decode_cloud(small, tmp_path, max_points=1_000_000)[1] == 50
+
+
+def test_point_count_of_json_bodies_matches_the_parser():
+    import json
+
+    from service.json_count import member_rows
+
+    rng = np.random.default_rng(3)
+    for n in (10, 997, 20_000):
+        doc = {"params": {"method": "tc", "viewpoint": [1, 2, 3]},
+               "points": rng.normal(size=(n, 3)).tolist(), "faces": [[0, 1, 2]] * 5,
+               "normals": rng.normal(size=(n, 3)).tolist()}
+        body = json.dumps(doc).encode()
+        for chunk in (7, 4096, 1 << 18):
+            assert member_rows(body, chunk) == {"points": n, "normals": n, "faces": 5}
+    tricky = b'{"params": {"method": "x]\\"[[["}, "points": [[1,2,3],[4,5,6]]}'
+    assert member_rows(tricky, 5)["points"] == 2
