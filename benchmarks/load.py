@@ -268,6 +268,16 @@ def wait_ready(url: str, process: subprocess.Popen, timeout: float = 180.0) -> N
     raise RuntimeError(f"the service was not ready in {timeout} s")
 
 
+def stop_server(server: subprocess.Popen) -> None:
+    """SIGTERM, then SIGKILL after 30 s."""
+    server.send_signal(signal.SIGTERM)
+    try:
+        server.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        server.kill()
+        server.wait()
+
+
 def busy_phase(url: str, key: str, workers: int, points: int, polls: int = 200,
                lane_off: bool = False) -> dict:
     """Poll ``GET /v1/jobs/{id}`` while every worker computes a large job, and time a small
@@ -357,12 +367,7 @@ def run(jobs: int, points: int, keys: int, workers: int, timeout: float,
             if busy_points:
                 report["busy"] = [busy_phase(url, key_list[0], workers, busy_points)]
         finally:
-            server.send_signal(signal.SIGTERM)
-            try:
-                server.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                server.kill()
-                server.wait()
+            stop_server(server)
         server_log = log_path.read_text(errors="replace")
     mib = 1 << 20
     report["memory"] = {
@@ -399,12 +404,7 @@ def busy_only(busy_points: int, workers: int) -> dict:
             wait_ready(url, server)
             return busy_phase(url, key, workers, busy_points, lane_off=True)
         finally:
-            server.send_signal(signal.SIGTERM)
-            try:
-                server.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                server.kill()
-                server.wait()
+            stop_server(server)
 
 
 def print_report(report: dict) -> None:
