@@ -77,10 +77,11 @@ class Settings(BaseSettings):
         1024, ge=0, description="Past the first read timeout, a body arriving slower than "
         "this on average is answered 408.")
     max_concurrent_uploads: int = Field(
-        64, ge=1, description="Uploads in progress at once (503 beyond; also kept below what "
+        256, ge=1, description="Uploads in progress at once (503 beyond; also kept below what "
         "the file descriptor limit allows).")
     max_uploads_per_key: int = Field(
-        8, ge=1, description="Uploads one API key may have in progress at once (429 beyond).")
+        100, ge=1, description="Uploads one API key may have in progress at once (429 "
+        "beyond; with max_jobs_per_key it bounds the folders one key can hold).")
     sync_max_points: int = Field(
         50_000, ge=10, description="Largest cloud POST /v1/curvature answers synchronously.")
     sync_time_limit_seconds: float = Field(

@@ -108,7 +108,8 @@ def test_killed_worker_charges_and_quarantines_only_its_own_job(client):
     from service_helpers import wait_for_job
     from test_limits import npy_upload
 
-    with changed_executor(client, max_attempts=2):
+    # Both jobs are large: the small-job lane is switched off so that both run at once.
+    with changed_executor(client, max_attempts=2, small_job_workers=0):
         victim = npy_upload(client, 400_000, seed=1).json()["id"]
         bystander = npy_upload(client, 400_000, seed=2).json()["id"]
         pid = None
