@@ -268,7 +268,73 @@ def wait_ready(url: str, process: subprocess.Popen, timeout: float = 180.0) -> N
     raise RuntimeError(f"the service was not ready in {timeout} s")
 
 
-def run(jobs: int, points: int, keys: int, workers: int, timeout: float) -> dict:
+def stop_server(server: subprocess.Popen) -> None:
+    """SIGTERM, then SIGKILL after 30 s."""
+    server.send_signal(signal.SIGTERM)
+    try:
+        server.wait(timeout=30)
+    except subprocess.TimeoutExpired:
+        server.kill()
+        server.wait()
+
+
+def busy_phase(url: str, key: str, workers: int, points: int, polls: int = 200,
+               lane_off: bool = False) -> dict:
+    """Poll ``GET /v1/jobs/{id}`` while every worker computes a large job, and time a small
+    job submitted meanwhile (issue 18, findings 6: head-of-line blocking and slow polling).
+
+    One large job per worker (``points`` random points, k-NN with k = 24) is uploaded and
+    waited for until all run; then ``polls`` sequential GETs of one of them are timed, and a
+    100-point job is submitted and followed to its end.
+    """
+    import httpx
+
+    headers = {"Authorization": f"Bearer {key}"}
+    with httpx.Client(base_url=url, headers=headers, timeout=60) as client:
+        large = []
+        for i in range(workers):
+            buffer = io.BytesIO()
+            np.save(buffer, np.random.default_rng(i).normal(size=(points, 3)))
+            response = client.post("/v1/jobs", files={"file": (f"big{i}.npy",
+                                                               buffer.getvalue())},
+                                   data={"params": json.dumps({"method": "knn", "k": 24})})
+            response.raise_for_status()
+            large.append(response.json()["id"])
+        # With the small-job lane on, one worker stays free: then one large job runs.
+        want = workers if lane_off else max(1, workers - 1)
+        deadline = time.monotonic() + 120
+        while sum(client.get(f"/v1/jobs/{j}").json()["status"] == "running"
+                  for j in large) < want:
+            if time.monotonic() > deadline:
+                raise RuntimeError("the large jobs did not start")
+            time.sleep(0.05)
+        small = client.post("/v1/jobs", json={"points": sphere(100, 1.0, 0).tolist()})
+        small.raise_for_status()
+        small_id, small_start = small.json()["id"], time.perf_counter()
+        small_seconds = None
+        latencies = []
+        for _ in range(polls):
+            start = time.perf_counter()
+            status = client.get(f"/v1/jobs/{large[0]}").json()["status"]
+            latencies.append(time.perf_counter() - start)
+            if small_seconds is None and client.get(
+                    f"/v1/jobs/{small_id}").json()["status"] in FINAL:
+                small_seconds = time.perf_counter() - small_start
+        still_busy = status == "running"
+        while small_seconds is None and time.perf_counter() - small_start < 600:
+            if client.get(f"/v1/jobs/{small_id}").json()["status"] in FINAL:
+                small_seconds = time.perf_counter() - small_start
+            time.sleep(0.05)
+        for job_id in large:
+            client.delete(f"/v1/jobs/{job_id}")
+    return {"large_points": points, "large_jobs": workers, "running_large": want,
+            "small_lane": not lane_off, "poll": percentiles(latencies),
+            "large_still_running_after_polls": still_busy,
+            "small_job_seconds": None if small_seconds is None else round(small_seconds, 3)}
+
+
+def run(jobs: int, points: int, keys: int, workers: int, timeout: float,
+        busy_points: int = 0) -> dict:
     """Start the service, run the client process against it, return the combined report."""
     key_list = [secrets.token_urlsafe(24) for _ in range(keys)]
     port = free_port()
@@ -298,13 +364,10 @@ def run(jobs: int, points: int, keys: int, workers: int, timeout: float) -> dict
                 raise RuntimeError(f"the client failed:\n{client.stderr[-3000:]}")
             report = json.loads(client.stdout)
             end_rss, end_pss = memory_of(process_tree(server.pid))
+            if busy_points:
+                report["busy"] = [busy_phase(url, key_list[0], workers, busy_points)]
         finally:
-            server.send_signal(signal.SIGTERM)
-            try:
-                server.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                server.kill()
-                server.wait()
+            stop_server(server)
         server_log = log_path.read_text(errors="replace")
     mib = 1 << 20
     report["memory"] = {
@@ -316,7 +379,32 @@ def run(jobs: int, points: int, keys: int, workers: int, timeout: float) -> dict
         "end_rss_mib": round(end_rss / mib), "end_pss_mib": round(end_pss / mib),
     }
     report["server_errors_logged"] = server_log.count(" ERROR ") + server_log.count("Traceback")
+    if busy_points:
+        # Every worker on a large job (the small-job lane switched off): polling while the
+        # cores are all taken, and how long a small job waits then.
+        report["busy"].append(busy_only(busy_points, workers))
     return report
+
+
+def busy_only(busy_points: int, workers: int) -> dict:
+    """:func:`busy_phase` on a fresh service whose workers all take large jobs."""
+    key = secrets.token_urlsafe(24)
+    port = free_port()
+    url = f"http://127.0.0.1:{port}"
+    with tempfile.TemporaryDirectory(prefix="curvature-busy-") as tmp:
+        env = {k: v for k, v in os.environ.items() if not k.startswith("CURVATURE_")}
+        env.update({"CURVATURE_HOST": "127.0.0.1", "CURVATURE_PORT": str(port),
+                    "CURVATURE_DATA_DIR": str(Path(tmp) / "data"), "CURVATURE_API_KEYS": key,
+                    "CURVATURE_WORKERS": str(workers), "CURVATURE_LOG_LEVEL": "warning",
+                    "CURVATURE_SMALL_JOB_WORKERS": "0"})
+        server = subprocess.Popen([sys.executable, "-m", "service"], cwd=REPO, env=env,
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                  start_new_session=True)
+        try:
+            wait_ready(url, server)
+            return busy_phase(url, key, workers, busy_points, lane_off=True)
+        finally:
+            stop_server(server)
 
 
 def print_report(report: dict) -> None:
@@ -332,6 +420,13 @@ def print_report(report: dict) -> None:
         if p:
             print(f"  {what:<10} n={p['n']:<5} p50 {p['p50_ms']:>8} ms  p95 {p['p95_ms']:>8} ms"
                   f"  p99 {p['p99_ms']:>8} ms  max {p['max_ms']:>8} ms")
+    for busy in report.get("busy", []):
+        p = busy["poll"]
+        lane = "small-job lane on" if busy["small_lane"] else "small-job lane off"
+        print(f"  {busy['large_jobs']} jobs of {busy['large_points']} points submitted, "
+              f"{busy['running_large']} running ({lane}): GET /v1/jobs/{{id}} p50 "
+              f"{p['p50_ms']} ms, p95 {p['p95_ms']} ms, max {p['max_ms']} ms (n={p['n']}); "
+              f"a 100-point job took {busy['small_job_seconds']} s")
     print(f"  memory of the service's {m['processes_peak']} processes: idle PSS "
           f"{m['idle_pss_mib']} MiB, peak PSS {m['peak_pss_mib']} MiB (peak RSS sum "
           f"{m['peak_rss_mib']} MiB), after the run PSS {m['end_pss_mib']} MiB")
@@ -350,10 +445,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--keys", type=int, default=4, help="API keys the jobs are spread over")
     parser.add_argument("--workers", type=int, default=2, help="CURVATURE_WORKERS")
     parser.add_argument("--json", type=Path, help="also write the report here")
+    parser.add_argument("--busy-points", type=int, default=0,
+                        help="then time polling while every worker runs a job of this many "
+                        "points (0: skip)")
     args = parser.parse_args(argv)
     if args.command == "client":
         return client_main(args)
-    report = run(args.jobs, args.points, args.keys, args.workers, args.timeout)
+    report = run(args.jobs, args.points, args.keys, args.workers, args.timeout,
+                 args.busy_points)
     print_report(report)
     if args.json:
         args.json.write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")

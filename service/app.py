@@ -17,6 +17,7 @@ from .auth import is_loopback, load_keyring
 from .cleanup import BusyFolders, cleanup_loop, sweep
 from .executor import create_executor
 from .metrics import RequestMetricsMiddleware, ServiceMetrics
+from .middleware import HygieneMiddleware, install_log_redaction
 from .problem_types import PROBLEM_TYPES, ProblemError
 from .problems import PROBLEM_MEDIA_TYPE
 from .routes import curvature as curvature_routes
@@ -40,7 +41,8 @@ stable and documented under `/problems/{slug}`.
 """
 
 INTERRUPTED = ProblemError(
-    "worker-crashed", "the service stopped while this job ran, too many times").to_dict()
+    "worker-crashed", "the service was restarted while this job ran, too many times "
+    "(CURVATURE_MAX_RESTARTS)").to_dict()
 
 
 @asynccontextmanager
@@ -62,7 +64,7 @@ async def lifespan(app: FastAPI):
     store = JobStore(settings.db_path, settings.store_busy_timeout_seconds)
     await anyio.to_thread.run_sync(store.initialize)
     requeued, failed = await anyio.to_thread.run_sync(
-        store.requeue_interrupted, settings.max_attempts, INTERRUPTED,
+        store.requeue_interrupted, settings.max_restarts, INTERRUPTED,
         settings.result_ttl_seconds)
     if requeued or failed:
         log.warning("recovered interrupted jobs: %d re-queued, %d failed", requeued, failed)
@@ -146,6 +148,9 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.keyring = None
     app.state.busy_folders = BusyFolders()
     problems.install(app)
+    # Outside the catch-all, so its 500s get the headers too.
+    app.add_middleware(HygieneMiddleware, router=app)
+    install_log_redaction()
     # Added last = outermost: it also counts the 500s the catch-all produces.
     app.add_middleware(RequestMetricsMiddleware, metrics=app.state.metrics)
     for module in (jobs, preview, curvature_routes, methods, health, problem_routes, ui):

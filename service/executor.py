@@ -15,13 +15,12 @@ from __future__ import annotations
 
 import asyncio
 import logging
-import multiprocessing
-import os
+import signal
 import time
 import uuid
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import anyio.to_thread
@@ -32,12 +31,22 @@ from .problem_types import ProblemError
 from .problems import HTTPProblem
 from .settings import Settings
 from .store import FAILED, JobStore
+from .sync_lane import SyncLane, new_pool
 
 log = logging.getLogger("service.executor")
 
-WORKER_CRASHED = ProblemError(
-    "worker-crashed", "the worker process died while running this job, too many times "
-    "(the cloud may need more memory than the worker has)").to_dict()
+
+
+def worker_crashed(runs: int) -> dict:
+    """The error of a job quarantined for killing its worker ``runs`` times."""
+    return ProblemError(
+        "worker-crashed", f"quarantined: the worker process died while running this job "
+        f"{runs} time(s) (CURVATURE_MAX_ATTEMPTS), so it is not run again; the cloud may "
+        "need more memory than a worker has, or the parameters may be too costly").to_dict()
+
+
+# How long the processes of a broken pool are given to report how they ended.
+_EXIT_WAIT_SECONDS = 5.0
 OUTCOME_LOST = ProblemError(
     "worker-crashed", "the outcome of this job could not be recorded, too many times "
     "(is the server's disk full?)").to_dict()
@@ -45,10 +54,29 @@ OUTCOME_LOST = ProblemError(
 
 @dataclass(eq=False)
 class _Pool:
-    """A process pool, and whether it was killed on purpose (time limit) rather than broke."""
+    """A process pool, whether it was killed on purpose (time limit) rather than broke, and
+    every worker process it started (kept to learn how each ended once it broke)."""
 
     executor: ProcessPoolExecutor
     killed_on_purpose: bool = False
+    processes: dict = field(default_factory=dict)
+
+    def note_processes(self) -> None:
+        self.processes.update(getattr(self.executor, "_processes", None) or {})  # no API
+
+    def culprits(self) -> set[int] | None:
+        """Pids of the workers that died by themselves (killed, crashed, out of memory).
+
+        When one worker dies, the pool terminates the others (SIGTERM) and fails every run;
+        the victims are told apart by that exit. Waits briefly for all exits to be known;
+        ``None`` when they are not (then nobody can be cleared).
+        """
+        deadline = time.monotonic() + _EXIT_WAIT_SECONDS
+        while any(p.exitcode is None for p in self.processes.values()):
+            if time.monotonic() > deadline:
+                return None
+            time.sleep(0.05)
+        return {pid for pid, p in self.processes.items() if p.exitcode != -signal.SIGTERM}
 
 
 @dataclass(eq=False)
@@ -84,6 +112,8 @@ class LocalPoolExecutor:
         self._tasks: list[asyncio.Task] = []
         self._loop: asyncio.AbstractEventLoop | None = None
         self._sync_pending = 0
+        self.sync_lane = SyncLane(settings, lambda reason: metrics.sync_stopped.inc(
+            reason=reason))
         self._stopping = False
         self.warmed_up = not settings.warmup
 
@@ -99,18 +129,13 @@ class LocalPoolExecutor:
     # -- lifecycle ---------------------------------------------------------------------------
 
     def _new_pool(self) -> _Pool:
-        context = multiprocessing.get_context(self.settings.start_method)
-        if self.settings.start_method == "forkserver":
-            # Import numpy/scipy/numba/curvature once in the fork server, not in every worker.
-            context.set_forkserver_preload(["service.worker"])
-        return _Pool(ProcessPoolExecutor(max_workers=self.workers, mp_context=context,
-                                         initializer=worker.init_worker,
-                                         initargs=(self.settings.log_level, os.getpid())))
+        return _Pool(new_pool(self.settings, self.workers))
 
     async def start(self) -> None:
         """Create the pool, start warm-up and the dispatcher."""
         self._loop = asyncio.get_running_loop()
         self._pool = self._new_pool()
+        self.sync_lane.start(warm=self.settings.warmup)
         self.metrics.pool_workers.set(self.workers)
         if self.settings.warmup:
             self._tasks.append(asyncio.create_task(self._warm_up()))
@@ -131,6 +156,7 @@ class LocalPoolExecutor:
         if self._pool is not None:
             _terminate(self._pool.executor)
             self._pool = None
+        self.sync_lane.stop()
         # Drop every reference to the old pool so its named semaphores are released (and
         # unregistered from the resource tracker) now rather than never.
         self._in_flight.clear()
@@ -191,8 +217,12 @@ class LocalPoolExecutor:
         free = self.workers - len(self._in_flight)
         if free <= 0 or self._pool is None:
             return
-        ids = await anyio.to_thread.run_sync(self.store.next_queued, free,
-                                             set(self._in_flight))
+        s = self.settings
+        # With two workers or more, one is kept for small jobs (no head-of-line blocking).
+        large_slots = max(1, self.workers - s.small_job_workers)
+        ids = await anyio.to_thread.run_sync(lambda: self.store.next_queued(
+            free, set(self._in_flight), large_bytes=s.small_job_bytes,
+            large_slots=large_slots))
         options = self._options
         for job_id in ids:
             if job_id in self._in_flight:
@@ -206,6 +236,7 @@ class LocalPoolExecutor:
             except (BrokenProcessPool, RuntimeError):
                 self._replace_pool(pool)
                 return
+            pool.note_processes()  # the pool starts a process on submit when one is missing
             self._in_flight[job_id] = _InFlight(future, pool, token, time.perf_counter())
             future.add_done_callback(self._done_callback(job_id))
         self.metrics.pool_busy.set(len(self._in_flight))
@@ -250,22 +281,36 @@ class LocalPoolExecutor:
         self.wake()
 
     async def _after_crash(self, job_id: str, token: str | None, pool: _Pool | None,
-                           error: dict = WORKER_CRASHED) -> None:
+                           error: dict | None = None) -> None:
         # A pool killed on purpose stopped this run for another job's time limit.
         on_purpose = pool is not None and pool.killed_on_purpose
+        innocent = on_purpose or (pool is not None
+                                  and await anyio.to_thread.run_sync(self._innocent, job_id,
+                                                                     pool))
+        max_attempts = self.settings.max_attempts
         try:
             status = await anyio.to_thread.run_sync(lambda: self.store.requeue_after_crash(
-                job_id, token, self.settings.max_attempts, error,
-                count_attempt=not on_purpose, ttl=self.settings.result_ttl_seconds))
+                job_id, token, max_attempts, error or worker_crashed(max_attempts),
+                count_attempt=not innocent, ttl=self.settings.result_ttl_seconds))
         except Exception:  # e.g. the store is locked or full: the watchdog tries again
             log.exception("job %s: could not re-queue it after its run ended", job_id)
             status = "left running (retried by the watchdog)"
         if status is not None:
             log.warning("job %s: its run ended without an outcome%s; job is now %s", job_id,
-                        " (pool stopped for a time limit)" if on_purpose else "", status)
+                        " (pool stopped for a time limit)" if on_purpose else
+                        " (another job's worker died; not charged)" if innocent else "",
+                        status)
         if pool is not None:
             self._replace_pool(pool)
         self.wake()
+
+    def _innocent(self, job_id: str, pool: _Pool) -> bool:
+        """True when the job's own worker was only stopped because another one died."""
+        job = self.store.get(job_id)
+        if job is None or job.worker_pid is None or job.worker_pid not in pool.processes:
+            return False
+        culprits = pool.culprits()
+        return bool(culprits) and job.worker_pid not in culprits
 
     def _replace_pool(self, broken: _Pool, on_purpose: bool = False) -> None:
         """Swap a broken pool for a new one (once, however many jobs report it)."""
@@ -353,16 +398,23 @@ class LocalPoolExecutor:
         """Synchronous requests handed to the pool and not answered yet."""
         return self._sync_pending
 
-    async def run_sync(self, *args) -> str:
-        """``worker.run_sync(*args)`` in the pool."""
+    async def run_sync(self, *args, disconnected=None) -> str:
+        """``worker.run_sync(*args)`` on the synchronous lane, under the synchronous time
+        limit, killed if ``disconnected`` (an awaitable) completes first."""
+        s = self.settings
         self._sync_pending += 1
         try:
-            return await self.call(worker.run_sync, *args)
+            return await self.sync_lane.run(
+                worker.run_sync, *args, disconnected=disconnected,
+                time_limit=min(s.sync_time_limit_seconds, s.job_time_limit_seconds))
         finally:
             self._sync_pending -= 1
 
-    async def render(self, job_dir: Path, fmt: str) -> str:
-        return await self.call(result_files.render, str(job_dir), fmt)
+    async def render(self, job_dir: Path, fmt: str, canonical_sha256: str | None = None,
+                     expected: str | None = None) -> tuple[str, str]:
+        """:func:`result_files.render` in the pool: path and digest of the file."""
+        return await self.call(result_files.render, str(job_dir), fmt, canonical_sha256,
+                               expected)
 
 
 def _terminate(pool: ProcessPoolExecutor, grace: float = 2.0, kill: bool = False) -> None:

@@ -9,6 +9,7 @@ import numpy as np
 
 import curvature
 
+from .input_guard import check_numpy_file
 from .problem_types import ProblemError
 
 # The library refuses smaller clouds (DESIGN.md section 3); checked here first so the
@@ -26,8 +27,15 @@ class CloudInput:
     dropped: int = 0
 
 
-def load_input(path: Path, kind: str, display_name: str | None) -> CloudInput:
-    """Read a job's input: an uploaded file (any library format) or stored JSON arrays."""
+def load_input(path: Path, kind: str, display_name: str | None,
+               max_points: int | None = None) -> CloudInput:
+    """Read a job's input: an uploaded file (any library format) or stored JSON arrays.
+
+    NPY/NPZ files are first checked by their declared shapes and compression against
+    ``max_points`` (:mod:`service.input_guard`), so a bomb is refused before it inflates.
+    """
+    if kind != "arrays":
+        check_numpy_file(path, display_name or path.name, max_points)
     if kind == "arrays":
         with np.load(path, allow_pickle=False) as data:
             return CloudInput(points=data["points"],

@@ -94,6 +94,9 @@ class ServiceMetrics:
                                    "Bytes of accepted request bodies.")
         self.sync_requests = Metric("curvature_sync_requests_total", "counter",
                                     "Synchronous curvature requests answered, by format.")
+        self.sync_stopped = Metric("curvature_sync_stopped_total", "counter",
+                                   "Synchronous runs ended by killing their process, by reason "
+                                   "(time-limit, disconnect, crashed).")
         self.problems = Metric("curvature_problems_total", "counter",
                                "Problem responses sent, by problem type.")
         self.jobs = Metric("curvature_jobs", "gauge", "Jobs in the store, by status.")
@@ -105,7 +108,8 @@ class ServiceMetrics:
 
     def render(self) -> str:
         families = [self.requests, self.request_seconds, self.jobs_submitted, self.jobs_finished,
-                    self.job_seconds, self.upload_bytes, self.sync_requests, self.problems,
+                    self.job_seconds, self.upload_bytes, self.sync_requests, self.sync_stopped,
+                    self.problems,
                     self.jobs, self.pool_workers, self.pool_busy, self.ready]
         lines: list[str] = []
         for family in families:

@@ -54,6 +54,9 @@ _TYPES = [
                 "The cloud has more points than the service accepts (CURVATURE_MAX_POINTS)."),
     ProblemType("too-many-points", 413, "Too many points for a synchronous answer",
                 "The cloud is larger than the synchronous limit; submit it as a job."),
+    ProblemType("too-costly", 413, "Too costly for a synchronous answer",
+                "The parameters ask for more work than a synchronous answer may take "
+                "(CURVATURE_SYNC_MAX_COST); use cheaper parameters or submit it as a job."),
     ProblemType("job-not-found", 404, "Job not found",
                 "No job has this id (it never existed, was deleted or has expired)."),
     ProblemType("result-not-ready", 409, "Result not ready",
@@ -66,11 +69,23 @@ _TYPES = [
     ProblemType("too-many-jobs", 429, "Too many jobs",
                 "This API key has too many unfinished jobs; retry after Retry-After seconds, "
                 "or cancel some."),
+    ProblemType("too-many-uploads", 429, "Too many uploads",
+                "This API key has too many uploads in progress at once; retry after "
+                "Retry-After seconds."),
+    ProblemType("request-timeout", 408, "Request timeout",
+                "The request body arrived too slowly (a read timeout or the minimum upload "
+                "rate); send it again on a faster connection."),
     ProblemType("queue-full", 503, "Queue full",
                 "Too many unfinished jobs or waiting requests; retry after Retry-After seconds."),
     ProblemType("store-busy", 503, "Job store busy",
                 "The job store stayed locked longer than its timeout; nothing was changed. "
                 "Retry after Retry-After seconds."),
+    ProblemType("store-read-only", 503, "Job store read-only",
+                "The job store or the data folder cannot be written (read-only file system or "
+                "file); nothing was changed. Retry after Retry-After seconds."),
+    ProblemType("result-corrupt", 503, "Result corrupt",
+                "A stored result file failed its checksum or is missing; the job is computed "
+                "again from its kept input. Retry after Retry-After seconds."),
     ProblemType("insufficient-storage", 507, "Insufficient storage",
                 "The server's disk is full; nothing was stored. Retry later."),
     ProblemType("time-limit", 422, "Time limit exceeded",

@@ -7,6 +7,7 @@ next to it. Every file is written to a temporary name and renamed into place.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import uuid
@@ -28,8 +29,30 @@ def _jsonable(value):
     return str(value)
 
 
-def save_canonical(result, path: Path) -> None:
-    """Store every array of a result in one NPZ (temp file, then atomic rename)."""
+class ResultCorrupt(Exception):
+    """The canonical result file is missing or does not match its recorded digest."""
+
+
+def file_sha256(path: Path) -> str:
+    """Hex SHA-256 of a file, read in chunks."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            digest.update(chunk)
+    return digest.hexdigest()
+
+
+def matches(path: Path, expected: str | None) -> bool:
+    """True when ``path`` exists and has digest ``expected`` (any digest when ``None``)."""
+    try:
+        return expected is None or file_sha256(path) == expected
+    except FileNotFoundError:
+        return False
+
+
+def save_canonical(result, path: Path) -> str:
+    """Store every array of a result in one NPZ (temp file, then atomic rename); return
+    the file's SHA-256, recorded in the store and checked whenever the file is used."""
     arrays = dict(result.fields())
     arrays["points"] = result.points
     if result.faces is not None:
@@ -39,11 +62,13 @@ def save_canonical(result, path: Path) -> None:
     try:
         with open(tmp, "wb") as fh:
             np.savez(fh, **arrays)
+        digest = file_sha256(tmp)
         os.replace(tmp, path)
     except BaseException:
         # A full disk must not leave a partial file behind to fill it further.
         tmp.unlink(missing_ok=True)
         raise
+    return digest
 
 
 def load_canonical(path: Path):
@@ -60,10 +85,33 @@ def write_result(result, path: Path, fmt: str) -> None:
     curvature.write(path, result, format=fmt)
 
 
-def render(job_dir: str, fmt: str) -> str:
-    """Path of a finished job's result in ``fmt``, written on first request and kept."""
+def render(job_dir: str, fmt: str, canonical_sha256: str | None = None,
+           expected: str | None = None) -> tuple[str, str]:
+    """Path and digest of a finished job's result in ``fmt``, written on first request.
+
+    A file already there is used when it matches ``expected`` (its recorded digest);
+    otherwise it is written again from the canonical file, which must match
+    ``canonical_sha256`` (``None``: not recorded, not checked).
+
+    Raises
+    ------
+    ResultCorrupt
+        The canonical file is missing or fails its checksum.
+    """
     folder = Path(job_dir)
+    canonical = folder / CANONICAL_RESULT
     target = folder / f"result.{fmt}"
-    if not target.exists():
-        write_result(load_canonical(folder / CANONICAL_RESULT), target, fmt)
-    return str(target)
+    if target == canonical or (expected is not None and matches(target, expected)):
+        if not matches(target, canonical_sha256 if target == canonical else expected):
+            raise ResultCorrupt(f"{target.name} is missing or fails its checksum")
+        return str(target), canonical_sha256 or file_sha256(target)
+    if not matches(canonical, canonical_sha256):
+        raise ResultCorrupt(f"{CANONICAL_RESULT} is missing or fails its checksum")
+    try:
+        result = load_canonical(canonical)
+    except (OSError, ValueError, KeyError) as exc:  # unreadable despite an unknown digest
+        if isinstance(exc, OSError) and not isinstance(exc, FileNotFoundError):
+            raise
+        raise ResultCorrupt(f"{CANONICAL_RESULT} cannot be read: {exc}") from None
+    write_result(result, target, fmt)
+    return str(target), file_sha256(target)

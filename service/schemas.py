@@ -70,8 +70,29 @@ class OrientationParams(BaseModel):
         return self
 
 
+def _fit_only_schema(schema: dict) -> None:
+    """Say in the JSON schema what :meth:`CommonParams._consistent` enforces: a fit-only
+    parameter (e.g. ``solver``) is refused unless ``fit`` is its model (the default fit
+    counts when ``fit`` is absent)."""
+    rules = []
+    default_fit = schema.get("properties", {}).get("fit", {}).get("default")
+    for name, only_fit in FIT_ONLY.items():
+        if name not in schema.get("properties", {}):
+            continue
+        other_fit = {"required": ["fit"],
+                     "properties": {"fit": {"not": {"const": only_fit}}}}
+        if default_fit != only_fit:  # an absent fit is another fit too
+            other_fit = {"anyOf": [other_fit, {"not": {"required": ["fit"]}}]}
+        rules.append({"if": other_fit,
+                      "then": {"properties": {name: {"type": "null"}}}})
+    if rules:
+        schema.setdefault("allOf", []).extend(rules)
+
+
 class CommonParams(OrientationParams):
     """Fields every neighborhood method shares: fit model, orientation and viewpoint."""
+
+    model_config = ConfigDict(extra="forbid", json_schema_extra=_fit_only_schema)
 
     fit: Literal[tuple(curvature.FITS)] = Field(
         "implicit", description="Quadric model fitted to each neighborhood.")
@@ -150,7 +171,7 @@ class CloudRequest(BaseModel):
     points: list[Vector3] = Field(min_length=10, description=(
         "Coordinates, one [x, y, z] per point; at least 10 points."))
     normals: list[Vector3] | None = Field(
-        None, description="Optional per-point normals, same length as points.")
+        None, min_length=10, description="Optional per-point normals, same length as points.")
     faces: list[tuple[int, int, int]] | None = Field(
         None, description="Optional triangles as vertex indices (kept in PLY results).")
     params: MethodParams | None = Field(  # type: ignore[valid-type]
@@ -219,7 +240,10 @@ class Job(BaseModel):
     params: dict[str, Any]
     input: JobInput
     n_points: int | None
-    attempts: int
+    attempts: int = Field(description="Runs charged to the job: those it started and that "
+                          "crashed or finished (a run stopped for another job's sake or by a "
+                          "server restart is not charged).")
+    restarts: int = Field(0, description="Server restarts that interrupted a run of the job.")
     created_at: datetime
     started_at: datetime | None
     finished_at: datetime | None

@@ -52,6 +52,15 @@ class Settings(BaseSettings):
     workers: int = Field(2, ge=1, le=256, description="Worker processes in the local pool.")
     start_method: Literal["spawn", "forkserver"] = Field(
         DEFAULT_START_METHOD, description="multiprocessing start method of the pool.")
+    small_job_bytes: int = Field(
+        4 << 20, ge=0, description="Jobs whose input is at most this many bytes are small: "
+        "they never wait for a worker behind large ones.")
+    small_job_workers: int = Field(
+        1, ge=0, description="Workers large jobs leave free for small ones (at least one "
+        "worker always takes large jobs).")
+    worker_nice: int = Field(
+        10, ge=0, le=19, description="Scheduling niceness of the worker processes, so the "
+        "server keeps answering (polls, uploads) while they compute.")
     estimate_workers: int = Field(
         1, ge=0, le=256,
         description="Threads each job may use inside the library (0: the library's default).")
@@ -62,8 +71,30 @@ class Settings(BaseSettings):
         1 << 30, ge=1024, description="Largest accepted request body (file uploads).")
     max_json_bytes: int = Field(
         64 << 20, ge=1024, description="Largest accepted JSON body (parsed in memory).")
+    upload_read_timeout_seconds: float = Field(
+        30, gt=0, description="A request body pausing longer than this is answered 408.")
+    min_upload_bytes_per_second: int = Field(
+        1024, ge=0, description="Past the first read timeout, a body arriving slower than "
+        "this on average is answered 408.")
+    max_concurrent_uploads: int = Field(
+        256, ge=1, description="Uploads in progress at once (503 beyond; also kept below what "
+        "the file descriptor limit allows).")
+    max_uploads_per_key: int = Field(
+        100, ge=1, description="Uploads one API key may have in progress at once (429 "
+        "beyond; with max_jobs_per_key it bounds the folders one key can hold).")
     sync_max_points: int = Field(
         50_000, ge=10, description="Largest cloud POST /v1/curvature answers synchronously.")
+    sync_time_limit_seconds: float = Field(
+        60, gt=0, description="A synchronous computation running longer than this (or than "
+        "job_time_limit_seconds, if smaller) is killed and answered 422 'time-limit'.")
+    sync_max_cost: float = Field(
+        2e9, gt=0, description="Work units (points times a per-point cost of the method's "
+        "parameters, see docs/reliability.md) a synchronous request may ask for; more is "
+        "answered 413 'too-costly'.")
+    sync_workers: int = Field(
+        1, ge=1, le=64, description="Processes serving synchronous requests, apart from the "
+        "job pool (each is killed on its own when its request runs too long or its client "
+        "hangs up).")
     max_pending_sync: int = Field(
         8, ge=1, description="Synchronous requests allowed to wait for a worker at once.")
     max_points: int = Field(
@@ -80,7 +111,11 @@ class Settings(BaseSettings):
     store_busy_timeout_seconds: float = Field(
         30, gt=0, description="How long a store operation waits for a locked SQLite file.")
     max_attempts: int = Field(
-        3, ge=1, description="Runs of one job (crashes, restarts) before it is marked failed.")
+        3, ge=1, description="Runs of one job that killed their worker process before the job "
+        "is quarantined (failed with 'worker-crashed').")
+    max_restarts: int = Field(
+        25, ge=1, description="Server restarts one job may be interrupted by before it is "
+        "marked failed (counted apart from max_attempts).")
     retry_after_seconds: int = Field(5, ge=1, description="Retry-After sent with 503.")
 
     result_ttl_seconds: float = Field(

@@ -12,6 +12,7 @@ import json
 import sqlite3
 import time
 import uuid
+from collections import Counter
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass
@@ -23,7 +24,7 @@ QUEUED, RUNNING, SUCCEEDED, FAILED, CANCELLED = (
 STATUSES = (QUEUED, RUNNING, SUCCEEDED, FAILED, CANCELLED)
 FINAL_STATUSES = (SUCCEEDED, FAILED, CANCELLED)
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS jobs (
     seq INTEGER PRIMARY KEY AUTOINCREMENT,
@@ -45,12 +46,20 @@ CREATE TABLE IF NOT EXISTS jobs (
     attempts INTEGER NOT NULL DEFAULT 0,
     run_token TEXT,
     error TEXT,
-    summary TEXT
+    summary TEXT,
+    restarts INTEGER NOT NULL DEFAULT 0,
+    worker_pid INTEGER,
+    result_sha256 TEXT,
+    checksums TEXT
 );
 CREATE INDEX IF NOT EXISTS jobs_owner_seq ON jobs (owner, seq);
 CREATE INDEX IF NOT EXISTS jobs_status_seq ON jobs (status, seq);
 CREATE INDEX IF NOT EXISTS jobs_expires ON jobs (expires_at);
+CREATE TABLE IF NOT EXISTS write_probe (id INTEGER PRIMARY KEY, at REAL NOT NULL);
 """
+# Columns added after version 1, with their definitions, for stores created before them.
+_ADDED_COLUMNS = {"restarts": "INTEGER NOT NULL DEFAULT 0", "worker_pid": "INTEGER",
+                  "result_sha256": "TEXT", "checksums": "TEXT"}
 
 
 @dataclass
@@ -77,11 +86,15 @@ class Job:
     run_token: str | None
     error: dict | None
     summary: dict | None
+    restarts: int = 0  # server restarts that interrupted a run (not held against the job)
+    worker_pid: int | None = None  # process of the current or last run
+    result_sha256: str | None = None  # digest of the canonical result file
+    checksums: dict | None = None  # digests of the rendered result files, by format
 
     @classmethod
     def from_row(cls, row: sqlite3.Row) -> Job:
         values = dict(row)
-        for key in ("params", "error", "summary"):
+        for key in ("params", "error", "summary", "checksums"):
             if values[key] is not None:
                 values[key] = json.loads(values[key])
         return cls(**values)
@@ -180,6 +193,10 @@ class JobStore:
             if mode.lower() != "wal":
                 raise RuntimeError(f"{self.db_path}: SQLite refused WAL mode (got {mode!r})")
             conn.executescript(_SCHEMA)
+            present = {r[1] for r in conn.execute("PRAGMA table_info(jobs)").fetchall()}
+            for name, definition in _ADDED_COLUMNS.items():
+                if name not in present:
+                    conn.execute(f"ALTER TABLE jobs ADD COLUMN {name} {definition}")
             conn.execute(f"PRAGMA user_version = {SCHEMA_VERSION}")
 
     def ping(self) -> bool:
@@ -191,12 +208,24 @@ class JobStore:
         except sqlite3.Error:
             return False
 
-    def requeue_interrupted(self, max_attempts: int, error: dict,
+    def writable(self) -> bool:
+        """True when the database takes a write (a read-only file or mount does not)."""
+        try:
+            with self._transaction() as conn:
+                conn.execute("INSERT OR REPLACE INTO write_probe (id, at) VALUES (1, ?)",
+                             (time.time(),))
+            return True
+        except sqlite3.Error:
+            return False
+
+    def requeue_interrupted(self, max_restarts: int, error: dict,
                             ttl: float | None = None) -> tuple[int, int]:
         """After a restart: put jobs left ``running`` back in the queue.
 
-        A job that already used ``max_attempts`` runs is marked failed with ``error`` instead
-        (kept for ``ttl`` seconds), so a job that kills its worker cannot loop forever.
+        The interrupted run is not an attempt of the job (the server stopped, not the job's
+        worker): it is counted in ``restarts`` instead, and a job interrupted by
+        ``max_restarts`` restarts is marked failed with ``error`` (kept for ``ttl``
+        seconds), so a job that takes the whole server down cannot loop forever.
 
         Returns
         -------
@@ -204,11 +233,13 @@ class JobStore:
         """
         now = time.time()
         with self._transaction() as conn:
+            conn.execute("UPDATE jobs SET restarts = restarts + 1, "
+                         "attempts = MAX(attempts - 1, 0) WHERE status = ?", (RUNNING,))
             failed = conn.execute(
                 "UPDATE jobs SET status = ?, finished_at = ?, expires_at = ?, error = ?, "
-                "run_token = NULL WHERE status = ? AND attempts >= ?",
+                "run_token = NULL WHERE status = ? AND restarts >= ?",
                 (FAILED, now, None if ttl is None else now + ttl, json.dumps(error), RUNNING,
-                 max_attempts)).rowcount
+                 max_restarts)).rowcount
             requeued = conn.execute(
                 "UPDATE jobs SET status = ?, progress = 0, run_token = NULL WHERE status = ?",
                 (QUEUED, RUNNING)).rowcount
@@ -291,12 +322,42 @@ class JobStore:
         counts.update({r[0]: r[1] for r in rows})
         return counts
 
-    def next_queued(self, limit: int, exclude: set[str]) -> list[str]:
-        """Ids of the oldest queued jobs not in ``exclude`` (already handed to the pool)."""
+    def next_queued(self, limit: int, exclude: set[str], *, large_bytes: int | None = None,
+                    large_slots: int | None = None, window: int = 1000) -> list[str]:
+        """Ids of the queued jobs to run next, not in ``exclude`` (already in the pool).
+
+        Fair share: each pick goes to the owner with the fewest jobs running or picked, the
+        oldest of that owner's jobs first, so one key's backlog does not hold up another's.
+        Size classes: a job of more than ``large_bytes`` input bytes is large, and at most
+        ``large_slots`` large jobs run at once, so a worker stays free for small jobs. Only
+        the ``window`` oldest queued jobs are considered (plain FIFO without the options).
+        """
         with self._conn() as conn:
-            rows = conn.execute("SELECT id FROM jobs WHERE status = ? ORDER BY seq LIMIT ?",
-                                (QUEUED, limit + len(exclude))).fetchall()
-        return [r[0] for r in rows if r[0] not in exclude][:limit]
+            queued = conn.execute(
+                "SELECT id, owner, input_bytes FROM jobs WHERE status = ? ORDER BY seq LIMIT ?",
+                (QUEUED, window + len(exclude))).fetchall()
+            running = conn.execute("SELECT id, owner, input_bytes FROM jobs WHERE status = ?",
+                                   (RUNNING,)).fetchall()
+        busy = {r[0]: r for r in running}
+        busy.update({r[0]: r for r in queued if r[0] in exclude})
+        candidates = [r for r in queued if r[0] not in exclude]
+        if large_bytes is None:
+            return [r[0] for r in candidates[:limit]]
+        share = Counter(r[1] for r in busy.values())
+        large = sum(r[2] > large_bytes for r in busy.values())
+        picked: list[str] = []
+        while candidates and len(picked) < limit:
+            allowed = [r for r in candidates
+                       if large_slots is None or r[2] <= large_bytes or large < large_slots]
+            if not allowed:
+                break
+            fewest = min(share[r[1]] for r in allowed)
+            row = next(r for r in allowed if share[r[1]] == fewest)  # oldest of that share
+            candidates.remove(row)
+            picked.append(row[0])
+            share[row[1]] += 1
+            large += row[2] > large_bytes
+        return picked
 
     def cancel(self, job_id: str, ttl: float) -> Job | None:
         """Mark a queued or running job cancelled; the running worker notices and stops.
@@ -384,13 +445,15 @@ class JobStore:
 
     # -- worker side -------------------------------------------------------------------------
 
-    def claim(self, job_id: str, run_token: str) -> Job | None:
-        """Move a queued job to running under ``run_token``; ``None`` if it is not queued."""
+    def claim(self, job_id: str, run_token: str, worker_pid: int | None = None) -> Job | None:
+        """Move a queued job to running under ``run_token`` in process ``worker_pid``;
+        ``None`` if it is not queued."""
         with self._transaction() as conn:
             changed = conn.execute(
                 "UPDATE jobs SET status = ?, started_at = ?, progress = 0, "
-                "attempts = attempts + 1, run_token = ? WHERE id = ? AND status = ?",
-                (RUNNING, time.time(), run_token, job_id, QUEUED)).rowcount
+                "attempts = attempts + 1, run_token = ?, worker_pid = ? "
+                "WHERE id = ? AND status = ?",
+                (RUNNING, time.time(), run_token, worker_pid, job_id, QUEUED)).rowcount
             row = conn.execute("SELECT * FROM jobs WHERE id = ?", (job_id,)).fetchone()
         return Job.from_row(row) if changed else None
 
@@ -408,16 +471,49 @@ class JobStore:
                          (n_points, job_id, run_token))
 
     def finish(self, job_id: str, run_token: str, *, status: str, ttl: float,
-               error: dict | None = None, summary: dict | None = None) -> bool:
-        """Record the outcome of a run; False when the run no longer owns the job."""
+               error: dict | None = None, summary: dict | None = None,
+               result_sha256: str | None = None) -> bool:
+        """Record the outcome of a run (with the digest of its canonical result file);
+        False when the run no longer owns the job."""
         now = time.time()
         with self._transaction() as conn:
             changed = conn.execute(
                 "UPDATE jobs SET status = ?, progress = CASE WHEN ? THEN 1.0 ELSE progress END, "
-                "finished_at = ?, expires_at = ?, error = ?, summary = ? "
-                "WHERE id = ? AND run_token = ? AND status = ?",
+                "finished_at = ?, expires_at = ?, error = ?, summary = ?, result_sha256 = ?, "
+                "checksums = NULL WHERE id = ? AND run_token = ? AND status = ?",
                 (status, status == SUCCEEDED, now, now + ttl,
                  None if error is None else json.dumps(error),
-                 None if summary is None else json.dumps(summary),
+                 None if summary is None else json.dumps(summary), result_sha256,
                  job_id, run_token, RUNNING)).rowcount
         return changed > 0
+
+    def set_checksum(self, job_id: str, fmt: str, digest: str) -> None:
+        """Record the digest of a rendered result file of a succeeded job."""
+        with self._transaction() as conn:
+            row = conn.execute("SELECT checksums FROM jobs WHERE id = ? AND status = ?",
+                               (job_id, SUCCEEDED)).fetchone()
+            if row is None:
+                return
+            checksums = json.loads(row[0]) if row[0] else {}
+            checksums[fmt] = digest
+            conn.execute("UPDATE jobs SET checksums = ? WHERE id = ?",
+                         (json.dumps(checksums), job_id))
+
+    def fail_lost(self, job_id: str, error: dict) -> bool:
+        """Mark a succeeded job failed with ``error``: its result and input are both lost."""
+        with self._transaction() as conn:
+            return conn.execute("UPDATE jobs SET status = ?, error = ?, summary = NULL "
+                                "WHERE id = ? AND status = ?",
+                                (FAILED, json.dumps(error), job_id, SUCCEEDED)).rowcount > 0
+
+    def requeue_for_recompute(self, job_id: str) -> bool:
+        """Put a succeeded job whose result was lost back in the queue (its input is kept).
+
+        Its attempts start over: the loss was the storage's fault, not the job's.
+        """
+        with self._transaction() as conn:
+            return conn.execute(
+                "UPDATE jobs SET status = ?, progress = 0, finished_at = NULL, "
+                "expires_at = NULL, summary = NULL, result_sha256 = NULL, checksums = NULL, "
+                "attempts = 0, run_token = NULL WHERE id = ? AND status = ?",
+                (QUEUED, job_id, SUCCEEDED)).rowcount > 0

@@ -22,11 +22,14 @@ from python_multipart.multipart import MultipartParser, parse_options_header
 from starlette.requests import ClientDisconnect
 
 from .formats import INPUT_EXTENSIONS, extension_of
+from .input_guard import check_numpy_file
 from .inputs import CloudInput, check_cloud
+from .json_count import member_rows
 from .problem_types import ProblemError
 from .problems import HTTPProblem, validation_errors
 from .schemas import METHOD_MODELS, MethodParams, default_params
 from .settings import Settings
+from .upload_gate import gate_of, timed_stream
 
 _PARAMS_ADAPTER: TypeAdapter = TypeAdapter(MethodParams)
 _MAX_PARAMS_BYTES = 64 * 1024
@@ -110,22 +113,26 @@ def _check_declared_length(request: Request, limit: int) -> None:
                           f"{limit} bytes")
 
 
-async def receive_cloud(request: Request, folder: Path, settings: Settings) -> ReceivedInput:
+async def receive_cloud(request: Request, folder: Path, settings: Settings,
+                        owner: str = "anonymous") -> ReceivedInput:
     """Store the request's cloud in ``folder`` (which must exist) and validate parameters.
 
     Raises
     ------
     HTTPProblem
         413 too large, 415 unknown file format or unsupported media type, 400 malformed body,
-        422 invalid parameters or cloud.
+        422 invalid parameters or cloud, 408 too slow, 429/503 too many uploads at once
+        (:mod:`service.upload_gate`).
     """
     content_type, options = parse_options_header(request.headers.get("content-type"))
     try:
         if content_type == b"multipart/form-data":
-            return await _receive_multipart(request, folder, options.get(b"boundary"),
-                                            settings.max_upload_bytes)
+            with gate_of(request).hold(owner, settings.retry_after_seconds):
+                return await _receive_multipart(request, folder, options.get(b"boundary"),
+                                                settings)
         if content_type == b"application/json" or content_type.endswith(b"+json"):
-            return await _receive_json(request, folder, settings.max_json_bytes)
+            with gate_of(request).hold(owner, settings.retry_after_seconds):
+                return await _receive_json(request, folder, settings)
     except ClientDisconnect:
         raise HTTPProblem("malformed-request", "the client disconnected during the upload") \
             from None
@@ -225,7 +232,8 @@ class _MultipartSink:
 
 
 async def _receive_multipart(request: Request, folder: Path, boundary: bytes | None,
-                             limit: int) -> ReceivedInput:
+                             settings: Settings) -> ReceivedInput:
+    limit, max_points = settings.max_upload_bytes, settings.max_points
     _check_declared_length(request, limit)
     if not boundary:
         raise HTTPProblem("malformed-request", "multipart/form-data without a boundary")
@@ -236,7 +244,7 @@ async def _receive_multipart(request: Request, folder: Path, boundary: bytes | N
         raise HTTPProblem("malformed-request", f"bad multipart boundary: {exc}") from None
     received = 0
     try:
-        async for chunk in request.stream():
+        async for chunk in timed_stream(request, settings):
             received += len(chunk)
             if received > limit:
                 raise HTTPProblem("too-large", f"the body exceeds the limit of {limit} bytes")
@@ -265,16 +273,22 @@ async def _receive_multipart(request: Request, folder: Path, boundary: bytes | N
     ext = extension_of(sink.filename)
     input_file = f"input.{ext}"
     (folder / UPLOAD_PART).replace(folder / input_file)
+    try:  # cheap: headers and the zip directory only
+        await anyio.to_thread.run_sync(check_numpy_file, folder / input_file, sink.filename,
+                                       max_points)
+    except ProblemError as exc:
+        raise HTTPProblem(exc.slug, exc.detail) from None
     return ReceivedInput(kind="file", input_file=input_file, filename=sink.filename,
                          format=ext, size=sink.file_bytes, params=params)
 
 
 # -- JSON -----------------------------------------------------------------------------------
 
-async def _read_limited(request: Request, limit: int) -> bytes:
+async def _read_limited(request: Request, settings: Settings) -> bytes:
+    limit = settings.max_json_bytes
     _check_declared_length(request, limit)
     body = bytearray()
-    async for chunk in request.stream():
+    async for chunk in timed_stream(request, settings):
         body += chunk
         if len(body) > limit:
             raise HTTPProblem("too-large", f"the JSON body exceeds the limit of {limit} bytes")
@@ -293,8 +307,18 @@ def _as_array(value: Any, name: str, dtype) -> np.ndarray:
     return arr
 
 
-def _decode_cloud(body: bytes, folder: Path) -> tuple[dict, int]:
-    """Parse, check and store the JSON cloud (runs in a thread: it can be big)."""
+def _decode_cloud(body: bytes, folder: Path, max_points: int | None = None) -> tuple[dict, int]:
+    """Parse, check and store the JSON cloud (runs in a thread: it can be big).
+
+    The points are counted on the raw bytes first (:mod:`service.json_count`): a cloud of
+    more than ``max_points`` is refused before any Python object is built for it.
+    """
+    if max_points is not None:
+        rows = member_rows(body)
+        n = max(rows.get("points", 0), rows.get("normals", 0))
+        if n > max_points:
+            raise HTTPProblem("cloud-too-large", f"the cloud has {n} points; this service "
+                              f"accepts at most {max_points} (CURVATURE_MAX_POINTS)")
     doc = parse_json(body, "malformed-request", "the body")
     if not isinstance(doc, dict):
         raise HTTPProblem("invalid-request", "the body must be a JSON object with 'points'")
@@ -337,8 +361,9 @@ def _decode_cloud(body: bytes, folder: Path) -> tuple[dict, int]:
     return params, len(points)
 
 
-async def _receive_json(request: Request, folder: Path, limit: int) -> ReceivedInput:
-    body = await _read_limited(request, limit)
-    params, n = await anyio.to_thread.run_sync(_decode_cloud, body, folder)
+async def _receive_json(request: Request, folder: Path, settings: Settings) -> ReceivedInput:
+    body = await _read_limited(request, settings)
+    params, n = await anyio.to_thread.run_sync(_decode_cloud, body, folder,
+                                               settings.max_points)
     return ReceivedInput(kind="arrays", input_file="input.npz", filename=None, format="json",
                          size=len(body), params=params, n_points=n)

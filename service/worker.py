@@ -8,6 +8,7 @@ callback raises, which aborts ``curvature.estimate``) and record the outcome.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import select
@@ -27,6 +28,7 @@ from .problem_types import ProblemError
 from .result_files import CANONICAL_RESULT, save_canonical, write_result
 from .storage_errors import storage_problem
 from .store import CANCELLED, FAILED, SUCCEEDED, JobStore
+from .sync_cost import sync_cost_problem
 
 log = logging.getLogger("service.worker")
 
@@ -47,8 +49,10 @@ def time_limit_problem(limit: float) -> ProblemError:
                         "or cheaper parameters")
 
 
-def init_worker(log_level: str = "INFO", server_pid: int | None = None) -> None:
-    """Pool initializer: log to stderr, and exit as soon as the server process is gone.
+def init_worker(log_level: str = "INFO", server_pid: int | None = None,
+                nice: int = 0) -> None:
+    """Pool initializer: log to stderr, lower the priority by ``nice``, and exit as soon as
+    the server process is gone.
 
     A worker must not outlive a killed server: the next server start runs the job again, and
     an orphan would keep burning a core on a result nobody records (the run token would
@@ -56,6 +60,10 @@ def init_worker(log_level: str = "INFO", server_pid: int | None = None) -> None:
     """
     logging.basicConfig(level=log_level.upper(), stream=sys.stderr,
                         format="%(asctime)s %(levelname)s %(name)s[%(process)d]: %(message)s")
+    if nice:
+        # Computing at a lower priority than the server keeps polling fast on busy cores.
+        with contextlib.suppress(OSError):
+            os.nice(nice)
     if server_pid is not None:
         threading.Thread(target=_exit_with, args=(server_pid,), name="server-watchdog",
                          daemon=True).start()
@@ -215,7 +223,7 @@ def run_job(db_path: str, jobs_dir: str, job_id: str, run_token: str, options: d
         The status this run left the job in, or ``"skipped"`` if it was no longer queued.
     """
     store = JobStore(db_path, options.get("busy_timeout", 30.0))
-    job = store.claim(job_id, run_token)
+    job = store.claim(job_id, run_token, os.getpid())
     if job is None:
         return "skipped"
     folder = Path(jobs_dir) / job_id
@@ -224,7 +232,8 @@ def run_job(db_path: str, jobs_dir: str, job_id: str, run_token: str, options: d
     ttl = options["result_ttl"]
     started = time.perf_counter()
     try:
-        cloud = load_input(folder / job.input_file, job.input_kind, job.input_name)
+        cloud = load_input(folder / job.input_file, job.input_kind, job.input_name,
+                           options.get("max_points"))
         check_cloud(cloud)
         store.set_points(job_id, run_token, len(cloud.points))
         check_point_limit(len(cloud.points), options.get("max_points"))
@@ -234,12 +243,13 @@ def run_job(db_path: str, jobs_dir: str, job_id: str, run_token: str, options: d
         if reporter.aborted:
             raise JobAborted(job_id)
         reporter(_ESTIMATED, force=True)
-        save_canonical(result, folder / CANONICAL_RESULT)
+        digest = save_canonical(result, folder / CANONICAL_RESULT)
         summary = summarize(result, cloud, time.perf_counter() - started)
-        if not store.finish(job_id, run_token, status=SUCCEEDED, ttl=ttl, summary=summary):
+        if not store.finish(job_id, run_token, status=SUCCEEDED, ttl=ttl, summary=summary,
+                            result_sha256=digest):
             raise JobAborted(job_id)
-        # The result holds points and faces, so the input is no longer needed.
-        (folder / job.input_file).unlink(missing_ok=True)
+        # The input is kept until the job expires: a result lost or corrupted on disk is
+        # computed again from it.
         return SUCCEEDED
     except JobAborted:
         (folder / CANONICAL_RESULT).unlink(missing_ok=True)
@@ -279,20 +289,24 @@ def check_point_limit(n_points: int, max_points: int | None) -> None:
 
 
 def run_sync(input_path: str, kind: str, display_name: str | None, params: dict, fmt: str,
-             out_dir: str, max_points: int, workers: int) -> str:
+             out_dir: str, max_points: int, workers: int, max_cost: float = float("inf")) -> str:
     """Compute a small cloud right away and write the result in ``fmt``; return its path.
 
     Raises
     ------
     ProblemError
-        Bad file, bad cloud, bad parameters, or more than ``max_points`` points.
+        Bad file, bad cloud, bad parameters, more than ``max_points`` points, or more work
+        than ``max_cost`` units (:mod:`service.sync_cost`).
     """
-    cloud = load_input(Path(input_path), kind, display_name)
+    cloud = load_input(Path(input_path), kind, display_name, max_points)
     check_cloud(cloud)
     if len(cloud.points) > max_points:
         raise ProblemError("too-many-points",
                            f"the cloud has {len(cloud.points)} points; synchronous answers "
                            f"are limited to {max_points}; submit it to POST /v1/jobs")
+    too_costly = sync_cost_problem(params, len(cloud.points), max_cost)
+    if too_costly is not None:
+        raise ProblemError("too-costly", too_costly)
     try:
         result = compute(cloud, params, workers)
         target = Path(out_dir) / f"result.{fmt}"

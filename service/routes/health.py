@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import tempfile
+from pathlib import Path
 from typing import Annotated
 
 import anyio.to_thread
@@ -26,10 +28,21 @@ class Readiness(BaseModel):
     checks: dict[str, bool]
 
 
+def _folder_writable(folder: Path) -> bool:
+    """True when a file can be created in ``folder`` (uploads and results go there)."""
+    try:
+        with tempfile.NamedTemporaryFile(dir=folder, prefix=".ready-"):
+            return True
+    except OSError:
+        return False
+
+
 def _checks(request: Request) -> dict[str, bool]:
     store = getattr(request.app.state, "store", None)
     executor = getattr(request.app.state, "executor", None)
-    return {"store": store is not None and store.ping(),
+    settings = request.app.state.settings
+    return {"store": store is not None and store.ping() and store.writable(),
+            "data_dir": _folder_writable(settings.jobs_dir) and _folder_writable(settings.tmp_dir),
             "pool": executor is not None and executor.ready}
 
 
@@ -39,7 +52,8 @@ def healthz() -> Health:
 
 
 @router.get("/readyz", response_model=Readiness, responses=problem_responses("not-ready"),
-            summary="Readiness: job store open, worker pool started and warmed up")
+            summary="Readiness: job store open and writable, data folder writable, worker "
+            "pool started and warmed up")
 async def readyz(request: Request) -> Readiness:
     checks = await anyio.to_thread.run_sync(_checks, request)
     if not all(checks.values()):

@@ -14,7 +14,9 @@ from ..dependencies import get_executor, get_metrics, get_settings, get_store, o
 from ..executor import LocalPoolExecutor
 from ..formats import RESULT_FORMATS, RESULT_MEDIA_TYPES
 from ..metrics import ServiceMetrics
+from ..problem_types import ProblemError
 from ..problems import HTTPProblem, problem_responses
+from ..result_files import ResultCorrupt
 from ..results import content_disposition, media_type, negotiate
 from ..schemas import Job, JobError, JobInput, JobPage, JobResult, timestamp
 from ..settings import Settings
@@ -74,7 +76,8 @@ def job_view(job: JobRecord) -> Job:
         method=job.params.get("method", ""), params=job.params,
         input=JobInput(kind=job.input_kind, filename=job.input_name, format=job.input_format,
                        bytes=job.input_bytes),
-        n_points=job.n_points, attempts=job.attempts, created_at=timestamp(job.created_at),
+        n_points=job.n_points, attempts=job.attempts, restarts=job.restarts,
+        created_at=timestamp(job.created_at),
         started_at=timestamp(job.started_at), finished_at=timestamp(job.finished_at),
         expires_at=timestamp(job.expires_at),
         error=JobError(**job.error) if job.error else None, result=result, links=links)
@@ -119,6 +122,8 @@ def _queue_problem(settings: Settings, scope: str, count: int, limit: int) -> HT
     summary="Submit a cloud for curvature estimation",
     responses={202: {"description": "Accepted and queued; Location gives the job's URL."},
                **problem_responses("malformed-request", "invalid-request", "invalid-parameters",
+                                   "malformed-file", "store-read-only",
+                                   "too-many-uploads", "request-timeout",
                                    "non-finite-coordinates", "too-large", "cloud-too-large",
                                    "unknown-format", "too-many-jobs", "queue-full",
                                    "insufficient-storage")},
@@ -151,7 +156,7 @@ async def submit_job(
     try:
         with request.app.state.busy_folders.hold(job_id):
             folder.mkdir(parents=True)
-            received = await receive_cloud(request, folder, settings)
+            received = await receive_cloud(request, folder, settings, owner)
             if received.n_points is not None and received.n_points > settings.max_points:
                 raise HTTPProblem("cloud-too-large", (
                     f"the cloud has {received.n_points} points; this service accepts at "
@@ -214,7 +219,7 @@ async def get_job(job_id: str, owner: Annotated[str, Depends(owner_id)],
                      "content": RESULT_CONTENT},
                **problem_responses("job-not-found", "result-not-ready", "job-failed",
                                    "not-acceptable", "invalid-request",
-                                   "insufficient-storage")},
+                                   "insufficient-storage", "result-corrupt")},
 )
 async def get_result(
     job_id: str, request: Request, owner: Annotated[str, Depends(owner_id)],
@@ -229,14 +234,40 @@ async def get_result(
     ``application/x-npz``), else JSON. JSON is columnar with NaN as null; PLY is binary with
     the input faces; 409 while the job is queued or running."""
     fmt = negotiate(format, request.headers.get("accept"))
-    await succeeded_job(store, job_id, owner)
+    job = await succeeded_job(store, job_id, owner)
+    expected = (job.checksums or {}).get(fmt)
     try:
-        path = await executor.render(settings.jobs_dir / job_id, fmt)
-    except FileNotFoundError:  # deleted or expired while we looked
-        raise HTTPProblem("job-not-found", f"no job with id {job_id!r}", job_id=job_id) \
-            from None
+        path, digest = await executor.render(settings.jobs_dir / job_id, fmt,
+                                             job.result_sha256, expected)
+    except ResultCorrupt as exc:
+        raise await recompute(store, executor, settings, job, str(exc)) from None
+    if digest != expected and fmt != "npz":
+        await anyio.to_thread.run_sync(store.set_checksum, job_id, fmt, digest)
     return FileResponse(path, media_type=media_type(fmt), headers={
         "Content-Disposition": content_disposition(job_id, fmt), "Vary": "Accept"})
+
+
+async def recompute(store: JobStore, executor: LocalPoolExecutor, settings: Settings,
+                     job: JobRecord, why: str) -> HTTPProblem:
+    """A succeeded job's stored result is lost: queue it again from its kept input, or fail
+    it when the input is gone too; the problem to answer either way."""
+    folder = settings.jobs_dir / job.id
+    retry = {"Retry-After": str(settings.retry_after_seconds)}
+    if await anyio.to_thread.run_sync(store.get, job.id) is None:  # deleted meanwhile
+        return HTTPProblem("job-not-found", f"no job with id {job.id!r}", job_id=job.id)
+    if (folder / job.input_file).is_file():
+        if await anyio.to_thread.run_sync(store.requeue_for_recompute, job.id):
+            for stale in folder.glob("result.*"):
+                stale.unlink(missing_ok=True)
+            executor.wake()
+        return HTTPProblem("result-corrupt", f"the stored result of job {job.id} is lost "
+                           f"({why}); the job has been queued to compute it again from its "
+                           "input: poll the job and retry", headers=retry, job_id=job.id)
+    error = ProblemError("result-corrupt", f"the stored result is lost ({why}) and the input "
+                         "is gone too; submit the cloud again").to_dict()
+    await anyio.to_thread.run_sync(lambda: store.fail_lost(job.id, error))
+    return HTTPProblem("result-corrupt", f"job {job.id}: {error['detail']}", headers=retry,
+                       job_id=job.id)
 
 
 @router.delete(

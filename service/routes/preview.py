@@ -14,11 +14,11 @@ from fastapi.responses import FileResponse
 import curvature
 
 from ..dependencies import get_settings, get_store, owner_id
-from ..problems import HTTPProblem, problem_responses
-from ..result_files import CANONICAL_RESULT
+from ..problems import problem_responses
+from ..result_files import CANONICAL_RESULT, ResultCorrupt, matches
 from ..settings import Settings
 from ..store import JobStore
-from .jobs import succeeded_job
+from .jobs import recompute, succeeded_job
 
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
 
@@ -33,7 +33,8 @@ def preview_path(job_dir: Path, field: str, view: str) -> Path:
     return job_dir / f"preview-{field}-{view}.png"
 
 
-def render_cached(job_dir: Path, field: str, view: str) -> Path:
+def render_cached(job_dir: Path, field: str, view: str,
+                  canonical_sha256: str | None = None) -> Path:
     """The cached PNG, rendered from the canonical result on first request.
 
     Only the two arrays the picture needs are read from the (uncompressed) result archive,
@@ -43,9 +44,14 @@ def render_cached(job_dir: Path, field: str, view: str) -> Path:
     ------
     FileNotFoundError
         The job's files are gone (deleted or expired).
+    ResultCorrupt
+        The canonical result fails its checksum ``canonical_sha256``.
     """
     target = preview_path(job_dir, field, view)
     if not target.exists():
+        if (job_dir / CANONICAL_RESULT).exists() and not matches(job_dir / CANONICAL_RESULT,
+                                                                 canonical_sha256):
+            raise ResultCorrupt(f"{CANONICAL_RESULT} fails its checksum")
         with np.load(job_dir / CANONICAL_RESULT, allow_pickle=False) as archive:
             arrays = {"points": archive["points"], field: archive[field]}
         curvature.render_preview(arrays, field, view=view, path=target)  # atomic rename
@@ -68,7 +74,8 @@ def _limiter(request: Request) -> anyio.CapacityLimiter:
                      "content": {"image/png": {"schema": {"type": "string",
                                                           "format": "binary"}}}},
                **problem_responses("job-not-found", "result-not-ready", "job-failed",
-                                   "job-cancelled", "invalid-request", "unauthorized")},
+                                   "job-cancelled", "invalid-request", "unauthorized",
+                                   "result-corrupt")},
 )
 async def get_preview(
     job_id: str, request: Request, owner: Annotated[str, Depends(owner_id)],
@@ -83,13 +90,17 @@ async def get_preview(
     between its 2nd and 98th percentile (symmetric around 0 with a diverging map for mean and
     Gaussian curvature); points without a value are grey. Large clouds are drawn from a
     fixed subsample of 400,000 points. Rendered on first request and kept with the job."""
-    await succeeded_job(store, job_id, owner)
+    job = await succeeded_job(store, job_id, owner)
     try:
         path = await anyio.to_thread.run_sync(render_cached, settings.jobs_dir / job_id, field,
-                                              view, limiter=_limiter(request))
-    except FileNotFoundError:  # deleted or expired while we looked
-        raise HTTPProblem("job-not-found", f"no job with id {job_id!r}", job_id=job_id) \
-            from None
+                                              view, job.result_sha256,
+                                              limiter=_limiter(request))
+    except FileNotFoundError as exc:  # deleted or expired while we looked, or lost
+        raise await recompute(store, request.app.state.executor, settings, job,
+                              f"{CANONICAL_RESULT} is missing ({exc.strerror})") from None
+    except ResultCorrupt as exc:
+        raise await recompute(store, request.app.state.executor, settings, job,
+                              str(exc)) from None
     return FileResponse(path, media_type="image/png", headers={
         "Content-Disposition": f'inline; filename="{job_id}-{field}-{view}.png"',
         "Cache-Control": "private, max-age=86400"})

@@ -56,7 +56,8 @@ def test_health_and_readiness(client):
     assert client.get("/healthz").json() == {"status": "ok"}
     ready = client.get("/readyz")
     assert ready.status_code == 200
-    assert ready.json() == {"status": "ready", "checks": {"store": True, "pool": True}}
+    assert ready.json() == {"status": "ready",
+                            "checks": {"store": True, "data_dir": True, "pool": True}}
 
 
 def test_metrics_are_prometheus_text(client):

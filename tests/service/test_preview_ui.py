@@ -103,11 +103,14 @@ def test_another_keys_job_is_404_and_no_key_is_401(client, done_job):
     assert_problem(client.get(url, headers={"Authorization": ""}), 401, "unauthorized")
 
 
-def test_job_whose_files_are_gone_is_404(client):
+def test_job_whose_result_is_gone_is_computed_again(client):
+    # A succeeded job exists: a lost result is not 'job-not-found' (issue 18, finding 5).
     response = client.post("/v1/jobs", json={"points": sphere(200).tolist()})
     job_id = wait_for_job(client, response.json()["id"])["id"]
     (client.app.state.settings.jobs_dir / job_id / "result.npz").unlink()
-    assert_problem(client.get(f"/v1/jobs/{job_id}/preview.png"), 404, "job-not-found")
+    assert_problem(client.get(f"/v1/jobs/{job_id}/preview.png"), 503, "result-corrupt")
+    assert wait_for_job(client, job_id)["status"] == "succeeded"
+    assert client.get(f"/v1/jobs/{job_id}/preview.png").status_code == 200
 
 
 def test_unfinished_and_cancelled_jobs_are_409(client):

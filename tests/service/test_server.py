@@ -131,10 +131,13 @@ def test_jobs_survive_sigkill_and_restart(tmp_path):
         for job_id in pending:
             job = wait_for_job(second.client, job_id, timeout=300)
             assert job["status"] == "succeeded", job
-        # A job interrupted while running was run again; queued ones ran once.
+        # A job interrupted while running was run again, its restart counted apart from its
+        # attempts (the restart was not the job's fault); queued ones ran once.
         for job_id, state in states.items():
-            attempts = second.client.get(f"/v1/jobs/{job_id}").json()["attempts"]
-            assert attempts == (2 if state == "running" else 1), (state, attempts)
+            job = second.client.get(f"/v1/jobs/{job_id}").json()
+            assert job["attempts"] == 1, (state, job)
+            # A job seen queued may have started in the moment before the kill.
+            assert job["restarts"] in ((1,) if state == "running" else (0, 1)), (state, job)
         again = second.client.get(f"/v1/jobs/{done['id']}/result?format=ply")
         assert again.status_code == 200 and again.content == before
     finally:

@@ -32,8 +32,26 @@ def add(store: JobStore, owner: str = "me") -> str:
 def test_wal_mode_and_schema(store):
     conn = sqlite3.connect(store.db_path)
     assert conn.execute("PRAGMA journal_mode").fetchone()[0] == "wal"
-    assert conn.execute("PRAGMA user_version").fetchone()[0] == 1
+    assert conn.execute("PRAGMA user_version").fetchone()[0] == 2
     conn.close()
+
+
+def test_a_version_1_store_gets_the_new_columns(tmp_path):
+    import service.store as store_module
+
+    path = tmp_path / "old.sqlite3"
+    conn = sqlite3.connect(path)
+    old_schema = store_module._SCHEMA.split("    restarts INTEGER")[0].rstrip().rstrip(",")
+    conn.executescript(old_schema + "\n);")
+    conn.execute("INSERT INTO jobs (id, owner, status, params, input_kind, input_file, "
+                 "input_bytes, created_at) VALUES ('j', 'o', 'queued', '{}', 'arrays', "
+                 "'input.npz', 1, 0)")
+    conn.commit()
+    conn.close()
+    old = JobStore(path)
+    old.initialize()
+    job = old.get("j")
+    assert job.restarts == 0 and job.result_sha256 is None and job.checksums is None
 
 
 def test_insert_is_durable_and_queued(store):
@@ -58,21 +76,24 @@ def test_claim_progress_finish(store):
 def test_restart_requeues_running_jobs_and_fences_the_old_run(store):
     job_id = add(store)
     store.claim(job_id, "old-run")
-    assert store.requeue_interrupted(max_attempts=3, error=ERROR) == (1, 0)
+    assert store.requeue_interrupted(max_restarts=3, error=ERROR) == (1, 0)
     assert store.get(job_id).status == "queued"
     # The orphaned old run can no longer write anything.
     assert not store.report_progress(job_id, "old-run", 0.9)
     assert not store.finish(job_id, "old-run", status="succeeded", ttl=60)
-    assert store.claim(job_id, "new-run").attempts == 2
+    # The restart is counted apart: it is not an attempt of the job.
+    job = store.claim(job_id, "new-run")
+    assert job.attempts == 1 and job.restarts == 1
 
 
-def test_job_failing_too_often_is_not_requeued_forever(store):
+def test_job_interrupted_by_too_many_restarts_is_not_requeued_forever(store):
     job_id = add(store)
     for attempt in range(3):
         store.claim(job_id, f"run-{attempt}")
-        store.requeue_interrupted(max_attempts=3, error=ERROR)
+        store.requeue_interrupted(max_restarts=3, error=ERROR)
     job = store.get(job_id)
-    assert job.status == "failed" and job.error == ERROR and job.attempts == 3
+    assert job.status == "failed" and job.error == ERROR
+    assert job.restarts == 3 and job.attempts == 0
 
 
 def test_requeue_after_worker_crash(store):
