@@ -15,6 +15,7 @@ import curvature
 from . import problems
 from .auth import is_loopback, load_keyring
 from .cleanup import BusyFolders, cleanup_loop, sweep
+from .datalock import DataDirLock
 from .executor import create_executor
 from .metrics import RequestMetricsMiddleware, ServiceMetrics
 from .problem_types import PROBLEM_TYPES, ProblemError
@@ -57,6 +58,10 @@ async def lifespan(app: FastAPI):
                     "sees every job; %s (set CURVATURE_API_KEYS to require keys)",
                     f"listening on loopback ({settings.host}) only" if is_loopback(settings.host)
                     else f"OPEN to anyone reaching {settings.host} (CURVATURE_ALLOW_OPEN)")
+    # `python -m service` takes the lock before binding; an embedding app takes it here.
+    own_lock = app.state.data_lock is None
+    if own_lock:
+        app.state.data_lock = DataDirLock.acquire(settings.data_dir)
     for folder in (settings.data_dir, settings.jobs_dir, settings.tmp_dir):
         folder.mkdir(parents=True, exist_ok=True)
     store = JobStore(settings.db_path, settings.store_busy_timeout_seconds)
@@ -86,6 +91,9 @@ async def lifespan(app: FastAPI):
             await cleanup
         await executor.stop()
         app.state.executor = None
+        if own_lock:
+            app.state.data_lock.release()
+            app.state.data_lock = None
 
 
 def build_openapi(app: FastAPI) -> dict:
@@ -144,6 +152,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.store = None
     app.state.executor = None
     app.state.keyring = None
+    app.state.data_lock = None  # DataDirLock of settings.data_dir while serving
     app.state.busy_folders = BusyFolders()
     problems.install(app)
     # Added last = outermost: it also counts the 500s the catch-all produces.
