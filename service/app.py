@@ -21,7 +21,7 @@ from .metrics import RequestMetricsMiddleware, ServiceMetrics
 from .problem_types import PROBLEM_TYPES, ProblemError
 from .problems import PROBLEM_MEDIA_TYPE
 from .routes import curvature as curvature_routes
-from .routes import health, jobs, methods, preview, ui
+from .routes import api_docs, health, jobs, methods, preview, ui
 from .routes import problems as problem_routes
 from .schemas import CloudRequest, MultipartCloudRequest, Problem
 from .settings import Settings
@@ -138,7 +138,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     """
     app = FastAPI(
         title="Curvature service", version=curvature.__version__, description=DESCRIPTION,
-        lifespan=lifespan,
+        lifespan=lifespan, docs_url=None, redoc_url=None,  # served offline: routes/api_docs.py
         openapi_tags=[
             {"name": "jobs", "description": "Asynchronous curvature jobs."},
             {"name": "curvature", "description": "Synchronous answers for small clouds."},
@@ -157,7 +157,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     problems.install(app)
     # Added last = outermost: it also counts the 500s the catch-all produces.
     app.add_middleware(RequestMetricsMiddleware, metrics=app.state.metrics)
-    for module in (jobs, preview, curvature_routes, methods, health, problem_routes, ui):
+    for module in (jobs, preview, curvature_routes, methods, health, problem_routes, ui,
+                   api_docs):
         app.include_router(module.router)
     app.openapi = lambda: build_openapi(app)
     return app
