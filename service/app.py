@@ -20,8 +20,8 @@ from .executor import create_executor
 from .metrics import RequestMetricsMiddleware, ServiceMetrics
 from .problem_types import PROBLEM_TYPES, ProblemError
 from .problems import PROBLEM_MEDIA_TYPE
-from .routes import curvature as curvature_routes
 from .routes import api_docs, health, jobs, methods, preview, ui
+from .routes import curvature as curvature_routes
 from .routes import problems as problem_routes
 from .schemas import CloudRequest, MultipartCloudRequest, Problem
 from .settings import Settings
