@@ -61,6 +61,7 @@ cleanup() {
     exit $status
 }
 trap cleanup EXIT
+trap 'exit 143' TERM INT
 
 if ! "$DOCKER" info >/dev/null 2>&1; then
     say "starting dockerd"

@@ -34,8 +34,7 @@ def bind(host: str, port: int) -> socket.socket:
     except BaseException:
         sock.close()
         raise
-    sock.set_inheritable(True)
-    return sock
+    return sock  # not inheritable: no child may keep the port after the server is gone
 
 
 def main() -> None:
