@@ -172,7 +172,7 @@ JOB=$(run_job "http://127.0.0.1:$PORT")
 TIMES[job]=$(since "$t")
 uid=$("$DOCKER" exec curvature-ci-1 id -u)
 [ "$uid" != 0 ] || { echo "the service runs as root" >&2; exit 1; }
-"$DOCKER" top curvature-ci-1 -o uid,cmd | awk 'NR > 1 && $1 == 0 { bad = 1 } END { exit bad }' \
+"$DOCKER" top curvature-ci-1 -o pid,uid,cmd | awk 'NR > 1 && $2 == 0 { bad = 1 } END { exit bad }' \
     || { echo "a process in the container runs as root" >&2; exit 1; }
 "$DOCKER" rm -f curvature-ci-1 >/dev/null
 start_container curvature-ci-2

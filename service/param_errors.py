@@ -63,5 +63,7 @@ def parameter_message(raw: Any, error: dict) -> str:
             spec.check(value, owner)
         except curvature.ParameterError as exc:
             return str(exc)
+        except (OverflowError, ValueError, TypeError):  # e.g. int(inf): the generic words
+            pass
     msg = error.get("msg") or "invalid value"
     return f"{owner}: parameter '{name}': {msg[:1].lower()}{msg[1:]}"
