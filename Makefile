@@ -3,6 +3,10 @@ PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
+# numba kernels compiled into their cache (curvature/**/__pycache__); numba recompiles a file's
+# kernels when the file changes, so the warm-up reruns whenever a library source does.
+KERNELS := $(VENV)/.kernels
+CORE_SOURCES := $(shell find curvature -name '*.py' 2>/dev/null)
 
 .PHONY: venv run demo test lint bench openapi clean
 
@@ -12,26 +16,30 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet -e '.[dev]'
 	touch $(STAMP)
 
-venv: $(STAMP)
+$(KERNELS): $(STAMP) $(CORE_SOURCES)
+	$(PY) -m curvature.warmup
+	touch $(KERNELS)
+
+venv: $(STAMP) $(KERNELS)
 
 # Main job: the service on 127.0.0.1:8000 (CURVATURE_HOST/PORT/DATA_DIR honoured).
-run: $(STAMP)
+run: $(STAMP) $(KERNELS)
 	$(PY) -m service
 
 # The CLI on a synthetic cloud it generates.
-demo: $(STAMP)
+demo: $(STAMP) $(KERNELS)
 	mkdir -p data
 	$(PY) -m curvature synthetic torus --n 20000 --noise 0.1 --seed 1 -o data/demo_torus.ply
 	$(PY) -m curvature estimate data/demo_torus.ply -o data/demo_torus_curvature.ply --fit monge
 
-test: $(STAMP)
+test: $(STAMP) $(KERNELS)
 	$(PY) -m ruff check .
 	$(PY) -m pytest -q
 
 lint: $(STAMP)
 	$(PY) -m ruff check .
 
-bench: $(STAMP)
+bench: $(STAMP) $(KERNELS)
 	$(PY) benchmarks/speed.py
 
 openapi: $(STAMP)

@@ -3,26 +3,48 @@
 from __future__ import annotations
 
 import logging
+import socket
 import sys
 
-import uvicorn
-
-from .app import create_app
+# Only light imports up here: the refusals below must come before numpy, numba and FastAPI
+# are loaded (seconds on a small machine).
 from .auth import KeyConfigError, check_exposure, load_keyring
+from .datalock import DataDirBusy, DataDirLock
 from .settings import Settings
 
 log = logging.getLogger("service")
 
-# Exit status when the configuration forbids starting (EX_CONFIG of sysexits.h).
+# Exit statuses (sysexits.h): the configuration forbids starting (EX_CONFIG), the port cannot
+# be bound (EX_OSERR), another server holds the data folder (EX_TEMPFAIL: retry once it is
+# gone), uvicorn's own start-up failed.
 EXIT_CONFIG = 78
+EXIT_BIND = 71
+EXIT_DATA_BUSY = 75
+EXIT_STARTUP = 3
+
+
+def bind(host: str, port: int) -> socket.socket:
+    """A listening TCP socket on ``host:port`` (IPv6 when ``host`` is an IPv6 address)."""
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    sock = socket.socket(family, socket.SOCK_STREAM)
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind((host, port))
+        sock.listen(2048)
+    except BaseException:
+        sock.close()
+        raise
+    return sock  # not inheritable: no child may keep the port after the server is gone
 
 
 def main() -> None:
     """Start the embedded default: SQLite job store and local pool under CURVATURE_DATA_DIR.
 
-    Refuses to start (exit status 78, with the reason logged) when the API keys cannot be
-    read, or when there are none and the host is not a loopback address, unless
-    ``CURVATURE_ALLOW_OPEN=true``.
+    In this order, so that a refusal leaves everything untouched: check the API keys (exit
+    status 78 when they cannot be read, or when there are none and the host is not a loopback
+    address, unless ``CURVATURE_ALLOW_OPEN=true``), bind the port (71 when it cannot be
+    bound), lock the data folder (75 when another server holds it, naming its pid); only
+    then load the numeric code, open the store and start the workers.
     """
     settings = Settings()
     logging.basicConfig(level=settings.log_level.upper(),
@@ -34,9 +56,31 @@ def main() -> None:
     if refusal is not None:
         log.critical(refusal)
         sys.exit(EXIT_CONFIG)
-    # One server process per data dir: the store's queue is not shared between processes.
-    uvicorn.run(create_app(settings), host=settings.host, port=settings.port,
-                log_level=settings.log_level, workers=1)
+    try:
+        sock = bind(settings.host, settings.port)
+    except OSError as exc:
+        log.critical("cannot listen on %s port %d: %s", settings.host, settings.port,
+                     exc.strerror or exc)
+        sys.exit(EXIT_BIND)
+    try:
+        lock = DataDirLock.acquire(settings.data_dir)
+    except DataDirBusy as exc:
+        log.critical("refusing to start: %s", exc)
+        sys.exit(EXIT_DATA_BUSY)
+    except OSError as exc:
+        log.critical("cannot lock the data folder %s: %s", settings.data_dir, exc)
+        sys.exit(EXIT_CONFIG)
+    import uvicorn
+
+    from .app import create_app
+
+    app = create_app(settings)
+    app.state.data_lock = lock
+    # One server process per data dir (the lock above): the store's queue is not shared.
+    server = uvicorn.Server(uvicorn.Config(app, log_level=settings.log_level, workers=1))
+    server.run(sockets=[sock])
+    if not server.started:
+        sys.exit(EXIT_STARTUP)
 
 
 if __name__ == "__main__":

@@ -15,13 +15,14 @@ import curvature
 from . import problems
 from .auth import is_loopback, load_keyring
 from .cleanup import BusyFolders, cleanup_loop, sweep
+from .datalock import DataDirLock
 from .executor import create_executor
 from .metrics import RequestMetricsMiddleware, ServiceMetrics
 from .middleware import HygieneMiddleware, install_log_redaction
 from .problem_types import PROBLEM_TYPES, ProblemError
 from .problems import PROBLEM_MEDIA_TYPE
+from .routes import api_docs, health, jobs, methods, preview, ui
 from .routes import curvature as curvature_routes
-from .routes import health, jobs, methods, preview, ui
 from .routes import problems as problem_routes
 from .schemas import CloudRequest, MultipartCloudRequest, Problem
 from .settings import Settings
@@ -59,6 +60,10 @@ async def lifespan(app: FastAPI):
                     "sees every job; %s (set CURVATURE_API_KEYS to require keys)",
                     f"listening on loopback ({settings.host}) only" if is_loopback(settings.host)
                     else f"OPEN to anyone reaching {settings.host} (CURVATURE_ALLOW_OPEN)")
+    # `python -m service` takes the lock before binding; an embedding app takes it here.
+    own_lock = app.state.data_lock is None
+    if own_lock:
+        app.state.data_lock = DataDirLock.acquire(settings.data_dir)
     for folder in (settings.data_dir, settings.jobs_dir, settings.tmp_dir):
         folder.mkdir(parents=True, exist_ok=True)
     store = JobStore(settings.db_path, settings.store_busy_timeout_seconds)
@@ -88,6 +93,9 @@ async def lifespan(app: FastAPI):
             await cleanup
         await executor.stop()
         app.state.executor = None
+        if own_lock:
+            app.state.data_lock.release()
+            app.state.data_lock = None
 
 
 def build_openapi(app: FastAPI) -> dict:
@@ -132,7 +140,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     """
     app = FastAPI(
         title="Curvature service", version=curvature.__version__, description=DESCRIPTION,
-        lifespan=lifespan,
+        lifespan=lifespan, docs_url=None, redoc_url=None,  # served offline: routes/api_docs.py
         openapi_tags=[
             {"name": "jobs", "description": "Asynchronous curvature jobs."},
             {"name": "curvature", "description": "Synchronous answers for small clouds."},
@@ -146,6 +154,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     app.state.store = None
     app.state.executor = None
     app.state.keyring = None
+    app.state.data_lock = None  # DataDirLock of settings.data_dir while serving
     app.state.busy_folders = BusyFolders()
     problems.install(app)
     # Outside the catch-all, so its 500s get the headers too.
@@ -153,7 +162,8 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     install_log_redaction()
     # Added last = outermost: it also counts the 500s the catch-all produces.
     app.add_middleware(RequestMetricsMiddleware, metrics=app.state.metrics)
-    for module in (jobs, preview, curvature_routes, methods, health, problem_routes, ui):
+    for module in (jobs, preview, curvature_routes, methods, health, problem_routes, ui,
+                   api_docs):
         app.include_router(module.router)
     app.openapi = lambda: build_openapi(app)
     return app

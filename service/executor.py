@@ -25,6 +25,8 @@ from pathlib import Path
 
 import anyio.to_thread
 
+from curvature.warmup import cache_is_warm
+
 from . import dask_tiles, result_files, worker
 from .metrics import ServiceMetrics
 from .problem_types import ProblemError
@@ -116,6 +118,8 @@ class LocalPoolExecutor:
             reason=reason))
         self._stopping = False
         self.warmed_up = not settings.warmup
+        self.compiling = False  # warm-up is compiling kernels (a cold numba cache)
+        self.compile_started = 0.0
 
     @property
     def _options(self) -> dict:
@@ -186,12 +190,25 @@ class LocalPoolExecutor:
         self._wake.set()
 
     async def _warm_up(self) -> None:
-        # One task per worker also makes the pool start all its processes now.
         started = time.perf_counter()
-        futures = [asyncio.wrap_future(self._pool.executor.submit(worker.warmup))
-                   for _ in range(self.workers)]
+        submit = self._pool.executor.submit
         try:
-            pids = await asyncio.gather(*futures)
+            pids = []
+            if not cache_is_warm():
+                # Compiling takes minutes; one worker fills numba's cache, the others then
+                # load from it instead of compiling the same kernels at the same time.
+                self.compiling = True
+                self.compile_started = time.monotonic()
+                log.warning("compiling the numeric kernels (numba cache missing or stale; "
+                            "`make venv` or `python -m curvature.warmup` does this at "
+                            "install): not ready until done, progress in the worker's log")
+                try:
+                    pids.append(await asyncio.wrap_future(submit(worker.warmup, True)))
+                finally:
+                    self.compiling = False
+            # One task per worker also makes the pool start all its processes now.
+            pids += await asyncio.gather(*(asyncio.wrap_future(submit(worker.warmup))
+                                           for _ in range(self.workers)))
             log.info("pool warm: %d task(s) on %d process(es) in %.1f s", len(pids),
                      len(set(pids)), time.perf_counter() - started)
         except BrokenProcessPool:

@@ -14,7 +14,15 @@ import math
 from datetime import UTC, datetime
 from typing import Annotated, Any, Literal, Union
 
-from pydantic import BaseModel, ConfigDict, Field, create_model, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    create_model,
+    field_validator,
+    model_validator,
+)
 
 import curvature
 from curvature import ParamSpec
@@ -146,11 +154,20 @@ METHOD_MODELS: dict[str, type[BaseModel]] = {
     "auto": _auto_model(),
     **{name: _method_model(name, finder) for name, finder in sorted(curvature.FINDERS.items())}}
 
+
+def _default_method(value: Any) -> Any:
+    """Parameters without ``method`` are those of the default method, as in the library."""
+    if isinstance(value, dict) and "method" not in value:
+        return {"method": DEFAULT_METHOD, **value}
+    return value
+
+
 if len(METHOD_MODELS) > 1:
     MethodParams = Annotated[Union[tuple(METHOD_MODELS.values())],  # noqa: UP007
-                             Field(discriminator="method")]
+                             Field(discriminator="method"), BeforeValidator(_default_method)]
 else:  # a one-member union cannot carry a discriminator
-    MethodParams = next(iter(METHOD_MODELS.values()))
+    MethodParams = Annotated[next(iter(METHOD_MODELS.values())),
+                             BeforeValidator(_default_method)]
 
 
 def default_params() -> BaseModel:
@@ -175,7 +192,8 @@ class CloudRequest(BaseModel):
     faces: list[tuple[int, int, int]] | None = Field(
         None, description="Optional triangles as vertex indices (kept in PLY results).")
     params: MethodParams | None = Field(  # type: ignore[valid-type]
-        None, description="Method and fit parameters; default: method 'knn' with defaults.")
+        None, description="Method and fit parameters; without 'method' (or without params) "
+        f"method '{DEFAULT_METHOD}' with its defaults.")
 
 
 class MultipartCloudRequest(BaseModel):

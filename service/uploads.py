@@ -25,6 +25,7 @@ from .formats import INPUT_EXTENSIONS, extension_of
 from .input_guard import check_numpy_file
 from .inputs import CloudInput, check_cloud
 from .json_count import member_rows
+from .param_errors import parameter_message
 from .problem_types import ProblemError
 from .problems import HTTPProblem, validation_errors
 from .schemas import METHOD_MODELS, MethodParams, default_params
@@ -92,14 +93,14 @@ def parse_params(raw: Any) -> dict:
         model = _PARAMS_ADAPTER.validate_python(raw)
     except ValidationError as exc:
         raw_errors = exc.errors(include_url=False, include_input=False)
+        detail = parameter_message(raw, raw_errors[0])
         for err in raw_errors:
             # A discriminated union puts the method tag first in loc; the client did not
             # write it, so drop it ("params.k", not "params.knn.k").
             if err["loc"] and err["loc"][0] in METHOD_MODELS:
                 err["loc"] = err["loc"][1:]
         errors = validation_errors(raw_errors, ("params",))
-        first = errors[0]
-        raise HTTPProblem("invalid-parameters", f"{'.'.join(first['loc'])}: {first['msg']}",
+        raise HTTPProblem("invalid-parameters", f"{'.'.join(errors[0]['loc'])}: {detail}",
                           errors=errors) from None
     return model.model_dump(mode="json")
 

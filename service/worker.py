@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 
 import curvature
+import curvature.warmup
 
 from .dask_tiles import cluster_problem, tile_options
 from .inputs import CloudInput, check_cloud, load_input
@@ -93,20 +94,26 @@ def _exit_with(pid: int) -> None:
     os._exit(70)
 
 
-def warmup() -> int:
-    """Run a tiny estimate so the numba kernels are compiled before the first job.
+def warmup(compile_all: bool = False) -> int:
+    """Get the numba kernels into this worker before the first job.
 
+    With ``compile_all`` every kernel is compiled (or loaded) by :mod:`curvature.warmup`,
+    logging each step: what a cold cache needs, done in one worker while the others wait for
+    the cache it fills. Otherwise a tiny estimate loads the common kernels from the cache.
     Returns the worker's pid (the pool uses it to count warmed workers).
     """
-    golden = np.pi * (3.0 - np.sqrt(5.0))
-    i = np.arange(400)
-    z = 1.0 - 2.0 * (i + 0.5) / i.size
-    r = np.sqrt(1.0 - z * z)
-    sphere = np.column_stack([r * np.cos(golden * i), r * np.sin(golden * i), z])
     try:
-        curvature.estimate(sphere, method="knn", k=10, workers=1)
+        if compile_all:
+            curvature.warmup.run(report=log.info)
+        else:
+            golden = np.pi * (3.0 - np.sqrt(5.0))
+            i = np.arange(400)
+            z = 1.0 - 2.0 * (i + 0.5) / i.size
+            r = np.sqrt(1.0 - z * z)
+            sphere = np.column_stack([r * np.cos(golden * i), r * np.sin(golden * i), z])
+            curvature.estimate(sphere, method="knn", k=10, workers=1)
     except Exception:  # warm-up is an optimisation; a failure must not take the pool down
-        log.exception("warm-up estimate failed")
+        log.exception("warm-up failed")
     return os.getpid()
 
 

@@ -30,7 +30,6 @@ import json
 import os
 import re
 import shutil
-import signal
 import socket
 import subprocess
 import sys
@@ -46,6 +45,9 @@ import pytest
 import curvature
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO / "tests" / "service"))
+from service_helpers import start_limit, stop_group  # noqa: E402
+
 DOCS = ("README.md", "docs/usage.md")
 # (blocks run, blocks skipped, text blocks checked) per page.
 EXPECTED = {"README.md": (9, 6, 5), "docs/usage.md": (14, 0, 0)}
@@ -163,8 +165,17 @@ class DocsServer:
                                             env=env, stdout=log, stderr=subprocess.STDOUT,
                                             start_new_session=True)
 
-    def wait_ready(self, timeout: float = 120.0) -> str:
+    def wait_ready(self, timeout: float | None = None) -> str:
+        """Start if needed and wait for /readyz 200: seconds with numba's cache warm, many
+        minutes when a worker compiles the kernels first. A failed start is stopped."""
         self.start()
+        try:
+            return self._wait(start_limit() if timeout is None else timeout)
+        except BaseException:
+            self.stop()
+            raise
+
+    def _wait(self, timeout: float) -> str:
         deadline = time.monotonic() + timeout
         while True:
             if self.process.poll() is not None:
@@ -180,14 +191,8 @@ class DocsServer:
             time.sleep(0.2)
 
     def stop(self) -> None:
-        if self.process is None or self.process.poll() is not None:
-            return
-        self.process.send_signal(signal.SIGTERM)
-        try:
-            self.process.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            self.process.kill()
-            self.process.wait(timeout=30)
+        if self.process is not None:
+            stop_group(self.process)
 
     def tail(self) -> str:
         return self.log.read_text(errors="replace")[-4000:] if self.log.exists() else ""

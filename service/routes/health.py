@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import tempfile
+import time
 from pathlib import Path
 from typing import Annotated
 
@@ -58,8 +59,21 @@ async def readyz(request: Request) -> Readiness:
     checks = await anyio.to_thread.run_sync(_checks, request)
     if not all(checks.values()):
         failing = ", ".join(k for k, ok in checks.items() if not ok)
-        raise HTTPProblem("not-ready", f"not ready: {failing}", checks=checks)
+        raise HTTPProblem("not-ready", f"not ready: {failing}{_warming(request)}",
+                          checks=checks)
     return Readiness(status="ready", checks=checks)
+
+
+def _warming(request: Request) -> str:
+    """What the pool is doing before it is ready, for the not-ready message."""
+    executor = getattr(request.app.state, "executor", None)
+    if executor is None or executor.ready or executor.warmed_up:
+        return ""
+    if executor.compiling:
+        seconds = time.monotonic() - executor.compile_started
+        return (f" (compiling kernels, {seconds:.0f} s so far: numba's cache was missing or "
+                "stale; progress in the log)")
+    return " (warming up the workers)"
 
 
 @router.get("/metrics", response_class=PlainTextResponse,

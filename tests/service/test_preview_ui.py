@@ -219,8 +219,9 @@ class DevTools:
 
 
 @contextlib.contextmanager
-def chromium(profile: Path):
-    """Headless Chromium with remote debugging; yields a DevTools session on its page."""
+def chromium(profile: Path, flags: tuple[str, ...] = ()):
+    """Headless Chromium with remote debugging (and ``flags``); yields a DevTools session on
+    its page."""
     from websockets.sync.client import connect
 
     process = subprocess.Popen(
@@ -228,7 +229,7 @@ def chromium(profile: Path):
          "--no-first-run", "--disable-background-networking", "--disable-component-update",
          "--disable-sync", "--disable-dev-shm-usage", "--hide-scrollbars", "--lang=en-US",
          "--remote-debugging-address=127.0.0.1", "--remote-debugging-port=0",
-         f"--user-data-dir={profile}", "--window-size=1200,800", "about:blank"],
+         f"--user-data-dir={profile}", "--window-size=1200,800", *flags, "about:blank"],
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     try:
         port_file = profile / "DevToolsActivePort"

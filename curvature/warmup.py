@@ -1,0 +1,227 @@
+"""Compile every numba kernel the library uses into numba's on-disk cache.
+
+``python -m curvature.warmup`` runs each method, fit, orientation, tiling and reader once on
+tiny clouds, serially and with two threads (the threaded kernels are separate functions), so
+every ``cache=True`` kernel is compiled for the argument types real runs give it and written to
+``__pycache__`` next to its source. Later processes load the machine code from there in about a
+second instead of compiling for minutes. With a valid cache the whole run takes seconds, so it
+is safe to run at every install. Numba drops a file's cache entries when that file changes;
+running this again recompiles just those.
+
+A successful run leaves ``__pycache__/kernels.warm`` holding a fingerprint of the package's
+sources; :func:`cache_is_warm` compares it, so a caller (the service, the tests) can tell in
+advance whether its first estimate loads kernels or compiles them.
+
+Exit status 1 when a kernel was never compiled (a new kernel the steps below do not reach).
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import sys
+import time
+from collections.abc import Callable, Iterator
+from importlib import import_module
+from pathlib import Path
+from pkgutil import walk_packages
+
+import numpy as np
+
+from . import synthetic
+from .io import read_bytes, write_bytes
+from .io.lzf import lzf_decompress
+from .neighborhoods.kdtree import build_tree, knn_rows
+from .pipeline import estimate
+
+Step = tuple[str, Callable[[], object]]
+PACKAGE = Path(__file__).resolve().parent
+STAMP = PACKAGE / "__pycache__" / "kernels.warm"
+
+
+def fingerprint() -> str:
+    """Hash of every source file's path, size and modification time (what numba's cache
+    index checks), and of the Python and numba versions."""
+    import numba
+
+    digest = hashlib.sha256(f"{sys.version} {numba.__version__}".encode())
+    for path in sorted(PACKAGE.rglob("*.py")):
+        stat = path.stat()
+        digest.update(f"{path.relative_to(PACKAGE)} {stat.st_size} {stat.st_mtime_ns}\n"
+                      .encode())
+    return digest.hexdigest()
+
+
+def cache_is_warm() -> bool:
+    """True when the last complete warm-up ran on the sources as they are now."""
+    try:
+        return STAMP.read_text().strip() == fingerprint()
+    except OSError:
+        return False
+
+
+def _sphere_mesh(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Points on the unit sphere, shape (n, 3), and their convex hull's triangles (m, 3)."""
+    from scipy.spatial import ConvexHull
+
+    pts = synthetic.sphere(n, seed=3).points
+    return pts, ConvexHull(pts).simplices.astype(np.int64)
+
+
+def _mixed_faces_ply() -> bytes:
+    """A binary PLY of a square pyramid, one quad and four triangles (list rows of two
+    lengths), and the same five vertices again higher up (the reader wants ten points)."""
+    apex = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 1]], "<f4")
+    verts = np.vstack([apex, apex + np.float32(2)])
+    faces = [(0, 3, 2, 1), (0, 1, 4), (1, 2, 4), (2, 3, 4), (3, 0, 4)]
+    header = (b"ply\nformat binary_little_endian 1.0\nelement vertex 10\nproperty float x\n"
+              b"property float y\nproperty float z\nelement face 5\n"
+              b"property list uchar int vertex_indices\nend_header\n")
+    body = b"".join(bytes([len(f)]) + np.array(f, "<i4").tobytes() for f in faces)
+    return header + verts.tobytes() + body
+
+
+def _literal_lzf(raw: bytes) -> bytes:
+    """``raw`` as an LZF stream of literal runs only (control byte ``c``: ``c + 1`` bytes)."""
+    out = bytearray()
+    for start in range(0, len(raw), 32):
+        chunk = raw[start:start + 32]
+        out.append(len(chunk) - 1)
+        out += chunk
+    return bytes(out)
+
+
+def _compressed_pcd(points: np.ndarray) -> bytes:
+    """A binary_compressed PCD of ``points`` (n, 3) as float32, fields one after another."""
+    n = points.shape[0]
+    raw = np.ascontiguousarray(points.astype("<f4").T).tobytes()
+    packed = _literal_lzf(raw)
+    header = ("VERSION 0.7\nFIELDS x y z\nSIZE 4 4 4\nTYPE F F F\nCOUNT 1 1 1\n"
+              f"WIDTH {n}\nHEIGHT 1\nVIEWPOINT 0 0 0 1 0 0 0\nPOINTS {n}\n"
+              "DATA binary_compressed\n").encode()
+    return header + np.array([len(packed), len(raw)], "<u4").tobytes() + packed
+
+
+def steps() -> Iterator[Step]:
+    """Every run the warm-up makes, as ``(label, call)``."""
+    clean = synthetic.torus(1500, seed=1)
+    noisy = synthetic.torus(1500, noise=1.0, seed=2)
+    for workers in (1, 2):
+        def run(*args, _w=workers, **kw):
+            return lambda: estimate(*args, workers=_w, **kw)
+
+        threads = f"{workers} thread(s)"
+        # the ring kernels run threaded from 4096 queries on
+        mesh_pts, faces = _sphere_mesh(300 if workers == 1 else 4200)
+        yield f"auto clean, {threads}", run(clean.points)
+        yield f"auto noisy, {threads}", run(noisy.points)
+        for fit, extra in (("implicit", {}), ("implicit", {"solver": "algebraic"}),
+                           ("monge", {}), ("nfr", {"k": 60})):
+            yield (f"knn {fit} {extra or ''}, {threads}",
+                   run(clean.points, "knn", fit=fit, **{"k": 24, **extra}))
+        yield f"tc, {threads}", run(clean.points, "tc")
+        yield f"egg, {threads}", run(clean.points, "egg")
+        yield f"mesh, {threads}", run(mesh_pts, "mesh", faces=faces)
+        yield f"mesh without faces, {threads}", run(clean.points, "mesh")
+        yield f"orientation normals, {threads}", run(clean.points, "knn",
+                                                      normals=clean.normals)
+        yield f"orientation viewpoint, {threads}", run(clean.points, "knn",
+                                                        viewpoint=[0.0, 0.0, 10.0])
+        yield f"tiled, {threads}", run(clean.points, "knn", tile_points=1000)
+    ply = write_bytes(clean.points, "ply")
+    yield "read binary ply", lambda: read_bytes(ply, "ply")
+    yield "read binary ply, faces of mixed sizes", lambda: read_bytes(_mixed_faces_ply(), "ply")
+    yield "k-d tree, serial query", lambda: knn_rows(clean.points, build_tree(clean.points),
+                                                     np.arange(10, dtype=np.int64), 5)
+    yield "read compressed pcd", lambda: read_bytes(_compressed_pcd(clean.points[:100]), "pcd")
+    yield "lzf", lambda: lzf_decompress(_literal_lzf(b"warm-up"), 7)
+
+
+def kernels() -> Iterator[tuple[str, object]]:
+    """Every numba dispatcher defined in the package, as ``("module.name", dispatcher)``.
+
+    Kernels marked ``inline="always"`` are left out: numba inlines them into their callers
+    and never compiles them on their own.
+    """
+    from numba.core.registry import CPUDispatcher
+
+    for info in walk_packages([str(PACKAGE)], prefix=f"{__package__}."):
+        if info.name.endswith((".__main__", ".warmup")):
+            continue
+        module = import_module(info.name)
+        for name, obj in vars(module).items():
+            if (isinstance(obj, CPUDispatcher) and obj.__module__ == module.__name__
+                    and obj.targetoptions.get("inline") != "always"):
+                yield f"{module.__name__}.{name}", obj
+
+
+def _callees(kernel) -> list:
+    """The kernels that ``kernel`` calls by a global name."""
+    from numba.core.registry import CPUDispatcher
+
+    space = kernel.py_func.__globals__
+    return [space[name] for name in kernel.py_func.__code__.co_names
+            if isinstance(space.get(name), CPUDispatcher)]
+
+
+def uncompiled() -> list[str]:
+    """Names of the package's kernels that no compiled (or cache-loaded) kernel covers.
+
+    A kernel loaded from the cache carries the machine code of the kernels it calls, which
+    then show no compiled version of their own; they count as covered through their caller.
+    With a single numba thread the threaded kernels are never called, so they do not count.
+    """
+    import numba
+
+    found = dict(kernels())
+    covered: set[int] = set()
+    todo = [kernel for kernel in found.values() if kernel.signatures]
+    while todo:
+        kernel = todo.pop()
+        if id(kernel) not in covered:
+            covered.add(id(kernel))
+            todo.extend(_callees(kernel))
+    threaded = numba.config.NUMBA_NUM_THREADS > 1
+    return sorted(name for name, kernel in found.items() if id(kernel) not in covered
+                  and (threaded or not kernel.targetoptions.get("parallel")))
+
+
+def run(report: Callable[[str], None] = print) -> list[str]:
+    """Run every step, reporting progress; returns :func:`uncompiled` afterwards.
+
+    Parameters
+    ----------
+    report : callable
+        Called with one line of progress per step (step number, label, seconds).
+    """
+    started = time.perf_counter()
+    todo = list(steps())
+    for i, (label, call) in enumerate(todo, 1):
+        t0 = time.perf_counter()
+        call()
+        report(f"kernels {i}/{len(todo)}: {label} ({time.perf_counter() - t0:.1f} s)")
+    missing = uncompiled()
+    if not missing:
+        try:
+            STAMP.write_text(fingerprint() + "\n")
+        except OSError as exc:  # a read-only install still works, it just cannot tell
+            report(f"cannot record the warm cache in {STAMP}: {exc}")
+    report(f"kernels ready in {time.perf_counter() - started:.1f} s"
+           + (f"; never compiled: {', '.join(missing)}" if missing else ""))
+    return missing
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m curvature.warmup", description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("-q", "--quiet", action="store_true", help="print the last line only")
+    args = parser.parse_args(argv)
+    lines: list[str] = []
+    missing = run(lines.append if args.quiet else lambda line: print(line, flush=True))
+    if args.quiet:
+        print(lines[-1])
+    return 1 if missing else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
