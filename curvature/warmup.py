@@ -115,6 +115,7 @@ def steps() -> Iterator[Step]:
         mesh_pts, faces = _sphere_mesh(300 if workers == 1 else 4200)
         yield f"auto clean, {threads}", run(clean.points)
         yield f"auto noisy, {threads}", run(noisy.points)
+        yield f"auto noisy at one scale, {threads}", run(noisy.points, scale_gamma=0.0)
         for fit, extra in (("implicit", {}), ("implicit", {"solver": "algebraic"}),
                            ("monge", {}), ("nfr", {"k": 60})):
             yield (f"knn {fit} {extra or ''}, {threads}",
