@@ -16,6 +16,7 @@ import numba
 import numpy as np
 
 from .auto import AUTO_PARAMS, AutoRun
+from .attributes import carry_input, file_viewpoint, orientation_rule
 from .cloud import PointCloud
 from .errors import ParameterError
 from .fitting import FIT_PARAMS, FITS, fit_neighborhoods, resolve_fit, stage1_normals
@@ -200,10 +201,16 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
         Unknown method, fit, preset, orientation or parameter, or a value out of bounds.
     """
     t_start = time.perf_counter()
+    cloud, file_normals, vp_source = None, False, None
     if isinstance(points, PointCloud):
-        normals = points.normals if normals is None else normals
-        faces = points.faces if faces is None else faces
-        points = points.points
+        cloud = points
+        file_normals = normals is None and cloud.normals is not None
+        normals = cloud.normals if normals is None else normals
+        file_vp = file_viewpoint(cloud, orientation, normals, viewpoint)
+        if file_vp is not None:
+            viewpoint, vp_source = file_vp, cloud.viewpoint_source
+        faces = cloud.faces if faces is None else faces
+        points = cloud.points
     pts = as_points(points)
     n = pts.shape[0]
     ref_normals = None if normals is None else as_vectors(normals, n, "normals")
@@ -244,8 +251,12 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
         **info, "preset": preset, "orientation": req.mode, "workers": req.workers, "points": n,
         "faces": 0 if tri is None else int(tri.shape[0]),
         "status_counts": res.status_counts(), "timings": timings,
+        "orientation_rule": orientation_rule(req.mode, from_file=vp_source,
+                                             normals_from_file=file_normals),
     }
-    return res
+    if vp is not None:
+        res.info["viewpoint"] = vp.tolist()
+    return res if cloud is None else carry_input(res, cloud)
 
 
 @dataclass(frozen=True)
