@@ -76,6 +76,9 @@ def read_ply(data: bytes, source=None) -> PointCloud:
     properties = unprefixed({k: v for k, v in cols.items() if k not in used})
     cloud = finish_cloud(source, points, normals=normals, properties=properties,
                          where=vertex.where, label="vertex")
+    cloud.viewpoint = header_viewpoint(header.comments, source)
+    if cloud.viewpoint is not None:
+        cloud.viewpoint_source = "PLY viewpoint comment"
     face = elements.get("face")
     if face is not None:
         name = next((n for n in FACE_LISTS if n in face.lists), None)
@@ -89,6 +92,30 @@ def read_ply(data: bytes, source=None) -> PointCloud:
                 items = items.astype(np.int64)
             cloud.faces = triangulate(source, counts, items, len(cloud), where=face.where)
     return cloud
+
+
+def header_viewpoint(comments: list[str], source) -> np.ndarray | None:
+    """The scanner position of a ``comment viewpoint x y z`` (or ``obj_info viewpoint``)
+    line, as (3,) float64; None when there is none.
+
+    Raises
+    ------
+    FormatError
+        The line does not hold three finite numbers.
+    """
+    for text in comments:
+        tok = text.split()
+        if not tok or tok[0].lower() != "viewpoint":
+            continue
+        try:
+            vp = np.array([float(v) for v in tok[1:]], dtype=np.float64)
+        except ValueError:
+            vp = np.empty(0)
+        if vp.size != 3 or not np.isfinite(vp).all():
+            raise FormatError(source, "the header's viewpoint comment needs three finite "
+                                      f"numbers 'viewpoint x y z', got {text[:80]!r}")
+        return vp
+    return None
 
 
 def unprefixed(properties: dict) -> dict:
@@ -151,6 +178,9 @@ def write_ply(fh: BinaryIO, table: Table, *, binary: bool = True) -> None:
     for key, value in table.info.items():
         if isinstance(value, str | int | float | bool) and "\n" not in str(value):
             head.append(f"comment {key} {value}")
+    vp = table.info.get("viewpoint")
+    if isinstance(vp, list | tuple) and len(vp) == 3:
+        head.append("comment viewpoint " + " ".join(repr(float(v)) for v in vp))
     head.append(f"element vertex {table.n}")
     head += [f"property {ptype} {name}" for name, ptype, _ in columns]
     if faces is not None:

@@ -219,7 +219,7 @@ def test_result_npz_round_trip(tmp_path):
         assert set(z.files) == {"points", "normals", "k1", "k2", "mean", "gaussian", "dir1",
                                 "dir2", "residual", "neighbor_count", "status", "faces",
                                 "shape_index", "curvedness", "index"}
-        assert z["dir1"].shape == (30, 3) and z["status"].dtype == np.int8
+        assert z["dir1"].shape == (30, 3) and z["status"].dtype == np.uint8
     cloud = read(path)
     np.testing.assert_array_equal(cloud.properties["d1z"], res.dir1[:, 2])
     assert_same_result(res, read_result(path))
