@@ -23,6 +23,9 @@ from .columns import Table
 # real lidar compresses 5-10x), so a lying point count is refused before anything is
 # allocated.
 MAX_LAZ_RATIO = 200
+# Extra dimension holding a column that the LAS field of its name cannot hold exactly (a
+# float intensity); read back under the plain name when that field is all zero.
+VALUE_SUFFIX = "_value"
 _HEADER_MIN = 227  # bytes of a LAS 1.0 - 1.2 public header block
 _NORMALS = ("nx", "ny", "nz")
 _COORDS = ("X", "Y", "Z", "x", "y", "z")
@@ -78,6 +81,11 @@ def read_las(data: bytes, source=None) -> PointCloud:
         normals = np.stack([np.asarray(las[n], dtype=np.float64) for n in _NORMALS], axis=1)
         names = [n for n in names if n not in _NORMALS]
     properties = {name: np.array(las[name]) for name in names}
+    for name in [n for n in properties if n.endswith(VALUE_SUFFIX)]:
+        # write_las put a column here that LAS's own field of that name could not hold
+        base = name[:-len(VALUE_SUFFIX)]
+        if base in properties and not properties[base].any():
+            properties[base] = properties.pop(name)
     stride = header.point_format.size
     start = header.offset_to_point_data
 
@@ -133,7 +141,7 @@ def write_las(fh: BinaryIO, table: Table, *, compress: bool = False) -> None:
     standard = {name for name, arr in cols.items()
                 if name in dims and name not in _COORDS and dims[name] is not None
                 and _fits(arr, dims[name])}
-    cols = {(name if name in standard or name not in dims else f"{name}_value"): arr
+    cols = {(name if name in standard or name not in dims else name + VALUE_SUFFIX): arr
             for name, arr in cols.items()}
     points = np.asarray(table.fields["points"], dtype=np.float64)
     extra = [(name, arr) for name, arr in cols.items()
