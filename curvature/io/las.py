@@ -10,6 +10,7 @@ dimension with its dtype. laspy and lazrs are optional (the ``formats`` extra).
 from __future__ import annotations
 
 import io
+import struct
 from typing import BinaryIO
 
 import numpy as np
@@ -26,7 +27,11 @@ MAX_LAZ_RATIO = 200
 # Extra dimension holding a column that the LAS field of its name cannot hold exactly (a
 # float intensity); read back under the plain name when that field is all zero.
 VALUE_SUFFIX = "_value"
-_HEADER_MIN = 227  # bytes of a LAS 1.0 - 1.2 public header block
+_HEADER_MIN = 227
+# Bytes of a point record per format (LAS 1.4 R15 table), extra bytes come on top.
+_RECORD_BYTES = {0: 20, 1: 28, 2: 26, 3: 34, 4: 57, 5: 63, 6: 30, 7: 36, 8: 38, 9: 59, 10: 67}
+_MAX_BODY_RATIO = MAX_LAZ_RATIO
+_LASZIP_MAX_ITEM = 14  # item types LASzip defines: 0 byte ... 14 wavepacket 1.4  # bytes of a LAS 1.0 - 1.2 public header block
 _NORMALS = ("nx", "ny", "nz")
 _COORDS = ("X", "Y", "Z", "x", "y", "z")
 
@@ -61,6 +66,7 @@ def read_las(data: bytes, source=None) -> PointCloud:
     if len(data) < _HEADER_MIN:
         raise FormatError(source, f"the LAS header needs at least {_HEADER_MIN} bytes, the "
                                   f"file has {len(data)}", offset=len(data))
+    check_public_header(data, source)
     try:
         with laspy.open(io.BytesIO(data)) as reader:
             header = reader.header
@@ -96,6 +102,57 @@ def read_las(data: bytes, source=None) -> PointCloud:
                         label="point")
 
 
+def check_public_header(data: bytes, source) -> None:
+    """Check the fixed header fields and the VLR chain by hand before laspy reads them.
+
+    laspy loops for a very long time on some corrupt VLR counts and lazrs aborts the process
+    on others, so offsets, counts and sizes are checked against the file's size first.
+
+    Raises
+    ------
+    FormatError
+        Naming the field and its byte offset.
+    """
+    size = len(data)
+    major, minor = data[24], data[25]
+    if major != 1 or minor > 4:
+        raise FormatError(source, f"LAS version {major}.{minor}; 1.0 to 1.4 are read",
+                          offset=24)
+    header_size, offset, n_vlrs = struct.unpack_from("<HII", data, 94)
+    fmt_id, record, legacy_count = struct.unpack_from("<BHI", data, 104)
+    if not _HEADER_MIN <= header_size <= min(offset, size):
+        raise FormatError(source, f"header size {header_size} must be between {_HEADER_MIN} "
+                                  f"and the point data offset {offset}", offset=94)
+    if offset > size:
+        raise FormatError(source, f"the point data offset {offset} is past the end of the "
+                                  f"{size}-byte file", offset=96)
+    base = _RECORD_BYTES.get(fmt_id & 0x3F)
+    if base is None:
+        raise FormatError(source, f"unknown point format {fmt_id & 0x3F}; 0 to 10 are "
+                                  "defined", offset=104)
+    if record < base:
+        raise FormatError(source, f"point records of {record} bytes are shorter than point "
+                                  f"format {fmt_id & 0x3F} needs ({base})", offset=105)
+    pos = header_size
+    for k in range(n_vlrs):
+        if pos + 54 > offset:
+            raise FormatError(source, f"VLR {k} of {n_vlrs} would start at byte {pos}, past "
+                                      f"the point data at {offset}", offset=100)
+        pos += 54 + struct.unpack_from("<H", data, pos + 52)[0]
+    if pos > offset:
+        raise FormatError(source, f"the VLRs end at byte {pos}, past the point data at "
+                                  f"{offset}", offset=pos)
+    if minor >= 4 and header_size >= 375:
+        evlr_start, n_evlrs = struct.unpack_from("<QI", data, 235)
+        if n_evlrs and (evlr_start > size or n_evlrs > (size - evlr_start) // 60):
+            raise FormatError(source, f"{n_evlrs} extended VLRs at byte {evlr_start} do not "
+                                      f"fit the {size}-byte file", offset=235)
+    elif legacy_count * record > _MAX_BODY_RATIO * max(size - offset, 1):
+        raise FormatError(source, f"the header says {legacy_count} points of {record} bytes, "
+                                  f"far more than the {size - offset} bytes of point data",
+                          offset=107)
+
+
 def _check_count(header, size: int, source) -> None:
     """Refuse point counts the file cannot hold, before laspy allocates for them."""
     count, stride = int(header.point_count), int(header.point_format.size)
@@ -105,6 +162,7 @@ def _check_count(header, size: int, source) -> None:
         raise FormatError(source, f"the header puts the points at byte {start} but the file "
                                   f"has {size} bytes", offset=size)
     if header.are_points_compressed:
+        _check_laszip(header, size, source)
         if count * stride > MAX_LAZ_RATIO * max(body, 1):
             raise FormatError(source, f"the header says {count} points but {body} compressed "
                                       "bytes cannot hold them: the file is truncated or the "
@@ -113,6 +171,37 @@ def _check_count(header, size: int, source) -> None:
         raise FormatError(source, f"the header says {count} points of {stride} bytes "
                                   f"({count * stride} bytes) but only {body} bytes follow "
                                   "the header", offset=size)
+
+
+def _check_laszip(header, size: int, source) -> None:
+    """Check the LASzip VLR against the point format before lazrs sees it.
+
+    lazrs aborts the whole process (it does not raise) on some inconsistent VLRs, so what it
+    relies on is checked here: the record's length for its item count, item sizes that add
+    up to the point record, a known compressor and a non-zero chunk size.
+    """
+    vlr = next((v for v in header.vlrs if getattr(v, "record_id", None) == 22204), None)
+    if vlr is None:
+        raise FormatError(source, "the points are compressed but there is no LASzip VLR "
+                                  "(user 'laszip encoded', record 22204)")
+    raw = bytes(vlr.record_data)
+    if len(raw) < 34:
+        raise FormatError(source, f"the LASzip VLR has {len(raw)} bytes, at least 34 expected")
+    compressor, coder = struct.unpack_from("<HH", raw, 0)
+    chunk_size = struct.unpack_from("<I", raw, 12)[0]
+    n_items = struct.unpack_from("<H", raw, 32)[0]
+    if len(raw) != 34 + 6 * n_items or n_items == 0:
+        raise FormatError(source, f"the LASzip VLR lists {n_items} items in {len(raw)} bytes; "
+                                  f"{34 + 6 * n_items} bytes expected")
+    items = [struct.unpack_from("<HHH", raw, 34 + 6 * k) for k in range(n_items)]
+    if compressor not in (1, 2, 3) or coder != 0 or chunk_size == 0:
+        raise FormatError(source, f"the LASzip VLR names compressor {compressor}, coder "
+                                  f"{coder}, chunk size {chunk_size}; expected compressor "
+                                  "1-3, coder 0 and a non-zero chunk size")
+    if any(t > _LASZIP_MAX_ITEM or z == 0 for t, z, _ in items) or \
+            sum(z for _, z, _ in items) != header.point_format.size:
+        raise FormatError(source, f"the LASzip items {[(t, z) for t, z, _ in items]} do not "
+                                  f"add up to the {header.point_format.size}-byte point record")
 
 
 def _las_scale(values: np.ndarray) -> tuple[float, float]:
