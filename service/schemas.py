@@ -23,6 +23,7 @@ from .formats import INPUT_EXTENSIONS, RESULT_FORMATS
 from .store import STATUSES
 
 DEFAULT_METHOD = curvature.DEFAULT_METHOD
+DEFAULT_FIT = curvature.DEFAULT_FIT
 
 FIT_PARAMS: tuple[ParamSpec, ...] = tuple(curvature.FIT_PARAMS)
 # Parameters that only make sense for one fit model.
@@ -74,7 +75,8 @@ class CommonParams(OrientationParams):
     """Fields every neighborhood method shares: fit model, orientation and viewpoint."""
 
     fit: Literal[tuple(curvature.FITS)] = Field(
-        "implicit", description="Quadric model fitted to each neighborhood.")
+        DEFAULT_FIT, description="Quadric model fitted to each neighborhood (default: the "
+        "height function, sane on real scans; preset 'paper' is the implicit one).")
 
     @model_validator(mode="after")
     def _consistent(self):

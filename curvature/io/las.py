@@ -27,11 +27,11 @@ MAX_LAZ_RATIO = 200
 # Extra dimension holding a column that the LAS field of its name cannot hold exactly (a
 # float intensity); read back under the plain name when that field is all zero.
 VALUE_SUFFIX = "_value"
-_HEADER_MIN = 227
+_HEADER_MIN = 227  # bytes of a LAS 1.0 - 1.2 public header block
 # Bytes of a point record per format (LAS 1.4 R15 table), extra bytes come on top.
 _RECORD_BYTES = {0: 20, 1: 28, 2: 26, 3: 34, 4: 57, 5: 63, 6: 30, 7: 36, 8: 38, 9: 59, 10: 67}
 _MAX_BODY_RATIO = MAX_LAZ_RATIO
-_LASZIP_MAX_ITEM = 14  # item types LASzip defines: 0 byte ... 14 wavepacket 1.4  # bytes of a LAS 1.0 - 1.2 public header block
+_LASZIP_MAX_ITEM = 14  # item types LASzip defines: 0 byte ... 14 wavepacket 1.4
 _NORMALS = ("nx", "ny", "nz")
 _COORDS = ("X", "Y", "Z", "x", "y", "z")
 
