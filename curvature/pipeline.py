@@ -37,10 +37,9 @@ from .validation import as_faces, as_points, as_vectors
 
 ORIENTATIONS = ("auto", "normals", "viewpoint")
 DEFAULT_METHOD = "auto"
-# Fit of the neighborhood methods when none is named. The implicit quadric on ~10 neighbors
-# (the paper's) is exact on clean data but turns real scans to speckle (bun000: |k1| p95 about
-# 3,900 with 24-NN against 232 for the height-function fit); see docs/defaults.md.
-DEFAULT_FIT = "monge"
+# Fit of the neighborhood methods when none is named (docs/defaults.md measures "monge" as
+# the saner choice on real scans; not switched yet).
+DEFAULT_FIT = "implicit"
 #: Named configurations: ``estimate(points, preset="paper")``.
 PRESETS = {
     # The paper's own setting: Territory Claiming grown to 10 neighbors from 30 candidates,
@@ -153,8 +152,7 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
         The others are the neighborhood methods of DESIGN.md 4.1-4.4; their parameters go in
         ``**params``.
     fit : {"implicit", "monge", "nfr"}, optional
-        Fit model of the neighborhood methods (DESIGN.md 4.5; default "monge", the height
-        function, which stays sane on real scans; ``preset="paper"`` gives the implicit one).
+        Fit model of the neighborhood methods (DESIGN.md 4.5; default "implicit").
         ``solver="taubin"|"algebraic"`` selects the implicit solver. "nfr" (normal-field
         regression) regresses PCA normals (``normal_k`` neighbors) on position over the
         neighborhood; it is made for large neighborhoods on noisy data. Method "auto" chooses

@@ -75,8 +75,7 @@ class CommonParams(OrientationParams):
     """Fields every neighborhood method shares: fit model, orientation and viewpoint."""
 
     fit: Literal[tuple(curvature.FITS)] = Field(
-        DEFAULT_FIT, description="Quadric model fitted to each neighborhood (default: the "
-        "height function, sane on real scans; preset 'paper' is the implicit one).")
+        DEFAULT_FIT, description="Quadric model fitted to each neighborhood.")
 
     @model_validator(mode="after")
     def _consistent(self):

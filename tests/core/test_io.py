@@ -156,8 +156,8 @@ def assert_same_result(a: CurvatureResult, b: CurvatureResult, faces=True):
 
 def test_format_names_and_extension_dispatch():
     assert set(FORMATS_READ) == {"ply", "pcd", "xyz", "csv", "txt", "asc", "npy", "npz",
-                                 "obj", "stl", "off"}
-    assert FORMATS_WRITE == ("ply", "csv", "npz", "json")
+                                 "obj", "stl", "off", "las", "laz", "e57"}
+    assert FORMATS_WRITE == ("ply", "csv", "npz", "json", "las", "laz")
     assert format_from_path("a/b/SCAN.PLY") == "ply"
     assert format_from_path("x.Json") == "json"
     assert curvature.read is read and curvature.write is write
@@ -325,6 +325,8 @@ def test_plain_array_every_write_format(tmp_path):
         write(path, pts)
         if fmt == "json":
             assert json.loads(path.read_text())["fields"]["points"] == pts.tolist()
+        elif fmt in ("las", "laz"):  # int32 coordinates, scaled
+            np.testing.assert_allclose(read(path).points, pts, atol=1e-5)
         else:
             np.testing.assert_array_equal(read(path).points, pts)
 
