@@ -24,7 +24,7 @@ from .fitting import FIT_PARAMS
 from .io import read, write
 from .neighborhoods import FINDERS, Neighborhoods, neighbors
 from .params import ParamSpec
-from .pipeline import DEFAULT_METHOD, FITS, METHODS, ORIENTATIONS, PRESETS, estimate
+from .pipeline import DEFAULT_FIT, DEFAULT_METHOD, FITS, METHODS, ORIENTATIONS, PRESETS, estimate
 from .preview import FIELDS as PREVIEW_FIELDS
 from .preview import VIEWS as PREVIEW_VIEWS
 from .preview import render_preview
@@ -35,6 +35,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "AUTO_PARAMS",
+    "DEFAULT_FIT",
     "DEFAULT_METHOD",
     "FINDERS",
     "FITS",

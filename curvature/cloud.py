@@ -25,6 +25,16 @@ class PointCloud:
         Rows dropped on read because a coordinate was NaN (organized PCD scans).
     source : str or None
         Where the cloud came from (file path), for messages.
+    index : ndarray, shape (n,), int64, or None
+        Each point's position in the input file (row of an organized grid counted row-major,
+        NaN rows included); None means ``0 .. n-1``.
+    grid : tuple of int (width, height), or None
+        Size of an organized scan's grid; ``index = row * width + col``.
+    viewpoint : ndarray, shape (3,), float64, or None
+        Scanner position the file records (PCD VIEWPOINT, E57 pose, PLY comment), for
+        orienting a single-view scan.
+    viewpoint_source : str or None
+        Where ``viewpoint`` came from, e.g. ``"PCD VIEWPOINT"``, for the result's info.
     """
 
     points: np.ndarray
@@ -33,6 +43,16 @@ class PointCloud:
     properties: dict[str, np.ndarray] = field(default_factory=dict)
     dropped: int = 0
     source: str | None = None
+    index: np.ndarray | None = None
+    grid: tuple[int, int] | None = None
+    viewpoint: np.ndarray | None = None
+    viewpoint_source: str | None = None
 
     def __len__(self) -> int:
         return int(self.points.shape[0])
+
+    def input_index(self) -> np.ndarray:
+        """Each point's position in the input file, shape (n,) int64."""
+        if self.index is None:
+            return np.arange(len(self), dtype=np.int64)
+        return np.asarray(self.index, dtype=np.int64)

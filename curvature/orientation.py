@@ -68,8 +68,9 @@ def signs_auto(points: np.ndarray, est: np.ndarray, graph: np.ndarray) -> np.nda
 
     The graph joins each point to its first neighbors (both ways) with weight 1 - |ni . nj|,
     so the forest prefers edges between nearly parallel normals, where a flip is unambiguous
-    (Hoppe et al., SIGGRAPH 1992). Each tree is seeded at its point farthest from its
-    centroid, with the normal pointing away from the centroid (outward on closed surfaces).
+    (Hoppe et al., SIGGRAPH 1992). Each tree's overall sign is the one under which its
+    normals point away from its centroid on balance (sum of n . (p - centroid) positive):
+    outward on closed surfaces, towards the scanner on a single range scan bulging at it.
     The forest is grown by Prim's algorithm straight on the neighbor table, so memory stays
     near 60 bytes per point beyond ``graph`` (no weighted edge list, no edge sort).
 
@@ -236,11 +237,11 @@ def spanning_forest(graph, rev_ptr, rev_idx, est, valid):
 
 @njit(cache=True)
 def forest_signs(points, est, parent, order):
-    """Signs of every point from the forest: consistent along edges, outward at each seed.
+    """Signs of every point from the forest: consistent along edges, outward on balance.
 
-    Each tree's seed is its point farthest from the tree's centroid (lowest index on ties);
-    its normal is turned away from the centroid, and signs follow the tree from there
-    (two points keep relative signs that agree with the product of edge flips between them).
+    Signs follow each tree from its root (two points keep relative signs that agree with the
+    product of edge flips between them); the tree is then flipped as a whole if the sum of
+    n . (p - centroid) over its points is negative.
 
     Returns
     -------
@@ -272,25 +273,19 @@ def forest_signs(points, est, parent, order):
     for c in range(n_trees):
         for d in range(3):
             cent[c, d] /= size[c]
-    far = np.full(n_trees, -1.0)
-    seed = np.full(n_trees, -1, np.int64)
+    # Vote over the whole tree rather than trusting one seed point: the farthest point of an
+    # open single-view scan lies on its rim, where normals graze and the sign is a coin toss.
+    vote = np.zeros(n_trees)
     for t in range(m):
         i = order[t]
         c = tree[i]
-        dist = 0.0
-        for d in range(3):
-            dist += (points[i, d] - cent[c, d]) ** 2
-        if dist > far[c] or (dist == far[c] and i < seed[c]):
-            far[c] = dist
-            seed[c] = i
-    flip = np.ones(n_trees, np.int8)
-    for c in range(n_trees):
-        s = seed[c]
         out = 0.0
         for d in range(3):
-            out += est[s, d] * (points[s, d] - cent[c, d])
-        want = 1 if out >= 0.0 else -1
-        flip[c] = want * rel[s]
+            out += est[i, d] * (points[i, d] - cent[c, d])
+        vote[c] += rel[i] * out
+    flip = np.ones(n_trees, np.int8)
+    for c in range(n_trees):
+        flip[c] = 1 if vote[c] >= 0.0 else -1
     sign = np.ones(n, np.int8)
     for t in range(m):
         i = order[t]

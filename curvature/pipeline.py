@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from .attributes import carry_input, file_viewpoint, orientation_rule
 from .auto import AUTO_PARAMS, AutoRun
 from .cloud import PointCloud
 from .errors import ParameterError
@@ -36,10 +37,14 @@ from .validation import as_faces, as_points, as_vectors
 
 ORIENTATIONS = ("auto", "normals", "viewpoint")
 DEFAULT_METHOD = "auto"
+# Fit of the neighborhood methods when none is named (docs/defaults.md measures "monge" as
+# the saner choice on real scans; not switched yet).
+DEFAULT_FIT = "implicit"
 #: Named configurations: ``estimate(points, preset="paper")``.
 PRESETS = {
-    # The paper's own setting: Territory Claiming grown to 10 neighbors, implicit quadric.
-    "paper": {"method": "tc", "fit": "implicit", "min_neighbors": 10},
+    # The paper's own setting: Territory Claiming grown to 10 neighbors from 30 candidates,
+    # implicit quadric.
+    "paper": {"method": "tc", "fit": "implicit", "min_neighbors": 10, "candidates": 30},
 }
 DEFAULT_CHUNK = 32768
 # Clouds above TILE_ABOVE points are processed in tiles of AUTO_TILE_POINTS (tile_points=None):
@@ -200,10 +205,16 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
         Unknown method, fit, preset, orientation or parameter, or a value out of bounds.
     """
     t_start = time.perf_counter()
+    cloud, file_normals, vp_source = None, False, None
     if isinstance(points, PointCloud):
-        normals = points.normals if normals is None else normals
-        faces = points.faces if faces is None else faces
-        points = points.points
+        cloud = points
+        file_normals = normals is None and cloud.normals is not None
+        normals = cloud.normals if normals is None else normals
+        file_vp = file_viewpoint(cloud, orientation, normals, viewpoint)
+        if file_vp is not None:
+            viewpoint, vp_source = file_vp, cloud.viewpoint_source
+        faces = cloud.faces if faces is None else faces
+        points = cloud.points
     pts = as_points(points)
     n = pts.shape[0]
     ref_normals = None if normals is None else as_vectors(normals, n, "normals")
@@ -244,8 +255,12 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
         **info, "preset": preset, "orientation": req.mode, "workers": req.workers, "points": n,
         "faces": 0 if tri is None else int(tri.shape[0]),
         "status_counts": res.status_counts(), "timings": timings,
+        "orientation_rule": orientation_rule(req.mode, from_file=vp_source,
+                                             normals_from_file=file_normals),
     }
-    return res
+    if vp is not None:
+        res.info["viewpoint"] = vp.tolist()
+    return res if cloud is None else carry_input(res, cloud)
 
 
 @dataclass(frozen=True)
@@ -277,7 +292,7 @@ def resolve_request(preset, method, fit, params, orientation, ref_normals, viewp
                 f"({', '.join(sorted(FINDERS))})")
         auto_params = resolve_params(AUTO_PARAMS, params, "method 'auto'")
     else:
-        fit = "implicit" if fit is None else fit
+        fit = DEFAULT_FIT if fit is None else fit
         fit_params, method_params = split_params(params)
         fit_opts = resolve_fit(fit, fit_params)
     nthreads = resolve_workers(workers)

@@ -27,6 +27,9 @@ FIELDS: dict[str, str] = {
     "k1": "principal curvature k1",
     "k2": "principal curvature k2",
 }
+# Colour-bar units: curvature is 1/length, Gaussian curvature (k1 * k2) 1/length^2.
+UNITS: dict[str, str] = {"mean": "1/length unit", "gaussian": "1/length unit^2",
+                         "k1": "1/length unit", "k2": "1/length unit"}
 
 # Camera presets for a z-up world: (direction from the cloud towards the camera, screen up).
 VIEWS: dict[str, tuple[tuple[float, float, float], tuple[float, float, float]]] = {
@@ -292,7 +295,7 @@ def render_preview(result, field: str = "mean", *, view: str = "iso", path=None,
               (True, True): "both"}[below, above]
     bar = fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), cax=fig.add_axes(COLORBAR_BOX),
                        extend=extend)
-    bar.set_label(f"{FIELDS[field]} [1/length unit]")
+    bar.set_label(f"{FIELDS[field]} [{UNITS[field]}]")
     fig.suptitle(title if title is not None else f"{FIELDS[field]} ({view} view)",
                  fontsize=12)
     nan_count = int(values.size - finite.size)

@@ -40,6 +40,10 @@ class CurvatureResult:
         Input faces, kept so a result PLY keeps the mesh.
     info : dict
         Method, fit, parameters and timings.
+    attributes : dict of str to ndarray, shape (n,)
+        Per-point input attributes carried through unchanged (colours, intensity, user
+        fields) and ``index``, each point's position in the input file (for an organized
+        scan also ``row`` and ``col`` of its grid cell).
     """
 
     points: np.ndarray
@@ -55,6 +59,7 @@ class CurvatureResult:
     residual: np.ndarray
     faces: np.ndarray | None = None
     info: dict = field(default_factory=dict)
+    attributes: dict[str, np.ndarray] = field(default_factory=dict)
 
     def __len__(self) -> int:
         return int(self.points.shape[0])
@@ -63,6 +68,36 @@ class CurvatureResult:
         """Per-point arrays by name: scalars (n,), vectors (n, 3), ints (n,)."""
         names = SCALAR_FIELDS + VECTOR_FIELDS + INT_FIELDS
         return {name: getattr(self, name) for name in names}
+
+    @property
+    def index(self) -> np.ndarray:
+        """Each point's position in the input file, shape (n,) int64 (``0 .. n-1`` if unset)."""
+        if "index" in self.attributes:
+            return np.asarray(self.attributes["index"], dtype=np.int64)
+        return np.arange(len(self), dtype=np.int64)
+
+    @property
+    def shape_index(self) -> np.ndarray:
+        """Koenderink's shape index S in [-1, 1], shape (n,), dimensionless.
+
+        S = (2 / pi) arctan((k1 + k2) / (k1 - k2)): +1 a convex cap, 0.5 a ridge, 0 a
+        symmetric saddle, -0.5 a valley (rut), -1 a cup, with this package's sign (positive
+        where the surface bends away from the oriented normal). Umbilics (k1 = k2) get +-1 by
+        the sign of H; flat points (k1 = k2 = 0) have no shape and are NaN.
+        """
+        with np.errstate(all="ignore"):
+            s = (2.0 / np.pi) * np.arctan2(self.k1 + self.k2, self.k1 - self.k2)
+        s[(self.k1 == 0) & (self.k2 == 0)] = np.nan
+        return s
+
+    @property
+    def curvedness(self) -> np.ndarray:
+        """Koenderink's curvedness C = sqrt((k1^2 + k2^2) / 2), shape (n,), 1/length unit."""
+        return np.sqrt(0.5 * (self.k1 * self.k1 + self.k2 * self.k2))
+
+    def derived_fields(self) -> dict[str, np.ndarray]:
+        """Fields computed from k1 and k2 on demand: shape index and curvedness, (n,)."""
+        return {"shape_index": self.shape_index, "curvedness": self.curvedness}
 
     def status_counts(self) -> dict[str, int]:
         """Number of points per status name, e.g. ``{"ok": 9998, "degenerate_fit": 2}``."""

@@ -25,6 +25,8 @@ class CloudInput:
     normals: np.ndarray | None = None
     faces: np.ndarray | None = None
     dropped: int = 0
+    # The cloud as read from a file: its attributes, index and viewpoint go to the result.
+    cloud: curvature.PointCloud | None = None
 
 
 def load_input(path: Path, kind: str, display_name: str | None,
@@ -48,7 +50,7 @@ def load_input(path: Path, kind: str, display_name: str | None,
     except curvature.CurvatureInputError as exc:
         raise ProblemError("invalid-cloud", f"{display_name or path.name}: {exc}") from None
     return CloudInput(points=cloud.points, normals=cloud.normals, faces=cloud.faces,
-                      dropped=int(getattr(cloud, "dropped", 0) or 0))
+                      dropped=int(getattr(cloud, "dropped", 0) or 0), cloud=cloud)
 
 
 def _file_problem(exc: curvature.FormatError, display_name: str) -> ProblemError:

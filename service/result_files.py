@@ -18,6 +18,8 @@ import numpy as np
 import curvature
 
 CANONICAL_RESULT = "result.npz"
+# Input attributes (colours, index ...) are stored as "attribute.<name>" arrays.
+ATTRIBUTE_PREFIX = "attribute."
 
 
 def _jsonable(value):
@@ -58,6 +60,7 @@ def save_canonical(result, path: Path) -> str:
     if result.faces is not None:
         arrays["faces"] = result.faces
     arrays["info"] = np.array(json.dumps(result.info or {}, default=_jsonable))
+    arrays.update({ATTRIBUTE_PREFIX + k: v for k, v in result.attributes.items()})
     tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex}.tmp")
     try:
         with open(tmp, "wb") as fh:
@@ -77,7 +80,9 @@ def load_canonical(path: Path):
         arrays = {key: data[key] for key in data.files}
     info = json.loads(str(arrays.pop("info")))
     faces = arrays.pop("faces", None)
-    return curvature.CurvatureResult(faces=faces, info=info, **arrays)
+    attributes = {k[len(ATTRIBUTE_PREFIX):]: arrays.pop(k) for k in list(arrays)
+                  if k.startswith(ATTRIBUTE_PREFIX)}
+    return curvature.CurvatureResult(faces=faces, info=info, attributes=attributes, **arrays)
 
 
 def write_result(result, path: Path, fmt: str) -> None:

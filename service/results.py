@@ -19,6 +19,8 @@ ACCEPTED_MEDIA_TYPES = {
     "application/csv": "csv",
     "application/x-npz": "npz",
     "application/zip": "npz",
+    "application/vnd.las": "las",
+    "application/vnd.laszip": "laz",
     "application/*": "json",
     "model/*": "ply",
     "text/*": "csv",

@@ -31,6 +31,7 @@ from .formats import INPUT_EXTENSIONS, RESULT_FORMATS
 from .store import STATUSES
 
 DEFAULT_METHOD = curvature.DEFAULT_METHOD
+DEFAULT_FIT = curvature.DEFAULT_FIT
 
 FIT_PARAMS: tuple[ParamSpec, ...] = tuple(curvature.FIT_PARAMS)
 # Parameters that only make sense for one fit model.
@@ -103,7 +104,7 @@ class CommonParams(OrientationParams):
     model_config = ConfigDict(extra="forbid", json_schema_extra=_fit_only_schema)
 
     fit: Literal[tuple(curvature.FITS)] = Field(
-        "implicit", description="Quadric model fitted to each neighborhood.")
+        DEFAULT_FIT, description="Quadric model fitted to each neighborhood.")
 
     @model_validator(mode="after")
     def _consistent(self):

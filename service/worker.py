@@ -136,8 +136,10 @@ def compute(cloud: CloudInput, params: dict, workers: int, progress=None,
     if solver is not None:
         p["solver"] = solver
     try:
-        result = curvature.estimate(cloud.points, method, normals=cloud.normals,
-                                    faces=cloud.faces, workers=workers or None,
+        # A file's cloud goes in whole, so its attributes and viewpoint reach the result.
+        given = {"normals": cloud.normals, "faces": cloud.faces} if cloud.cloud is None else {}
+        result = curvature.estimate(cloud.points if cloud.cloud is None else cloud.cloud,
+                                    method, **given, workers=workers or None,
                                     progress=progress, **common, **(tiles or {}), **p)
     except curvature.ParameterError as exc:
         raise ProblemError("invalid-parameters", str(exc)) from None

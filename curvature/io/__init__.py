@@ -1,6 +1,7 @@
 """Reading and writing point clouds and curvature results (DESIGN.md section 6).
 
-Read: PLY, PCD, XYZ/CSV/TXT/ASC, NPY/NPZ, OBJ/STL/OFF. Write: PLY, CSV, NPZ, JSON.
+Read: PLY, PCD, XYZ/CSV/TXT/ASC, NPY/NPZ, OBJ/STL/OFF, LAS/LAZ, E57.
+Write: PLY, CSV, NPZ, JSON, LAS/LAZ.
 Every malformed input raises :class:`~curvature.errors.FormatError` naming the file and,
 where it applies, the line or byte offset; an unknown extension raises
 :class:`~curvature.errors.UnknownFormatError`.
@@ -27,7 +28,9 @@ from ..result import CurvatureResult
 from .arrays import read_npy, read_npz, write_npz
 from .atomic import atomic_open
 from .columns import result_from_cloud, table_of
+from .e57 import read_e57
 from .json_format import write_json
+from .las import read_las, write_las
 from .meshes import read_obj, read_off, read_stl
 from .pcd import read_pcd
 from .ply import read_ply, write_ply
@@ -45,14 +48,19 @@ _READERS: dict[str, Callable[[bytes, str | None], PointCloud]] = {
     "obj": read_obj,
     "stl": read_stl,
     "off": read_off,
+    "las": read_las,
+    "laz": read_las,
+    "e57": read_e57,
 }
 FORMATS_READ: tuple[str, ...] = tuple(_READERS)
-FORMATS_WRITE: tuple[str, ...] = ("ply", "csv", "npz", "json")
+FORMATS_WRITE: tuple[str, ...] = ("ply", "csv", "npz", "json", "las", "laz")
 MEDIA_TYPES = {
     "ply": "application/octet-stream",  # no registered type; text/plain for ascii is common
     "csv": "text/csv",
     "npz": "application/octet-stream",
     "json": "application/json",
+    "las": "application/vnd.las",
+    "laz": "application/vnd.laszip",
 }
 
 __all__ = [
@@ -172,6 +180,8 @@ def _write_table(fileobj: BinaryIO, table, fmt: str, binary: bool) -> None:
         write_csv(fileobj, table)
     elif fmt == "json":
         write_json(fileobj, table)
+    elif fmt in ("las", "laz"):
+        write_las(fileobj, table, compress=fmt == "laz")
     elif _seekable(fileobj):
         write_npz(fileobj, table)
     else:

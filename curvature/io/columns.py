@@ -14,6 +14,7 @@ import numpy as np
 from ..cloud import PointCloud
 from ..errors import FormatError
 from ..result import CurvatureResult
+from .colors import expand_colors
 
 VECTOR_COLUMNS = {
     "points": ("x", "y", "z"),
@@ -24,6 +25,8 @@ VECTOR_COLUMNS = {
 # Result fields in the order they are written (DESIGN.md section 6).
 RESULT_ORDER = ("normals", "k1", "k2", "mean", "gaussian", "dir1", "dir2", "residual",
                 "neighbor_count", "status")
+# Written after them, computed from k1 and k2 (CurvatureResult.derived_fields).
+DERIVED = ("shape_index", "curvedness")
 
 
 def column_names(name: str, width: int) -> tuple[str, ...]:
@@ -80,13 +83,16 @@ def table_of(obj, source=None) -> Table:
         all_fields = obj.fields()
         order = [k for k in RESULT_ORDER if k in all_fields]
         order += [k for k in all_fields if k not in order]
-        fields = {"points": obj.points, **{k: all_fields[k] for k in order}}
+        all_fields["status"] = np.asarray(all_fields["status"]).astype(np.uint8)  # 0..4
+        fields = {"points": obj.points, **{k: all_fields[k] for k in order},
+                  **obj.derived_fields(), "index": obj.index}
+        fields.update(expand_colors(dict(obj.attributes)))
         faces, info = obj.faces, dict(obj.info or {})
     elif isinstance(obj, PointCloud):
         fields = {"points": obj.points}
         if obj.normals is not None:
             fields["normals"] = obj.normals
-        fields.update(obj.properties)
+        fields.update(expand_colors(dict(obj.properties)))
         faces, info = obj.faces, {}
     elif isinstance(obj, np.ndarray | list | tuple):
         fields, faces, info = {"points": obj}, None, {}
@@ -162,6 +168,9 @@ def result_from_cloud(cloud: PointCloud) -> CurvatureResult:
 
     if cloud.normals is None:
         raise FormatError(cloud.source, "not a curvature result: no normals")
+    own = set(RESULT_ORDER) | set(DERIVED) | {c for name in VECTOR_COLUMNS
+                                              for c in VECTOR_COLUMNS[name]}
+    attributes = {k: v for k, v in props.items() if k not in own}
     return CurvatureResult(
         points=cloud.points,
         k1=np.asarray(scalar("k1"), dtype=np.float64),
@@ -175,4 +184,5 @@ def result_from_cloud(cloud: PointCloud) -> CurvatureResult:
         status=np.asarray(scalar("status")).astype(np.int8),
         residual=np.asarray(scalar("residual"), dtype=np.float64),
         faces=cloud.faces,
+        attributes=attributes,
     )

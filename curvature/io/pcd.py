@@ -38,6 +38,7 @@ class PCDHeader:
     data: str
     body_offset: int
     n_lines: int
+    viewpoint: np.ndarray | None = None  # (3,) sensor origin from VIEWPOINT
 
     @property
     def row_size(self) -> int:
@@ -131,7 +132,25 @@ def parse_pcd_header(data: bytes, source) -> PCDHeader:
     if len(kind_vals) != 1 or kind_vals[0] not in _DATA:
         raise FormatError(source, "DATA must be ascii, binary or binary_compressed",
                           line=dline)
-    return PCDHeader(fields, dtypes, counts, width, height, points, kind_vals[0], pos, lineno)
+    return PCDHeader(fields, dtypes, counts, width, height, points, kind_vals[0], pos, lineno,
+                     _viewpoint(source, values.get("VIEWPOINT")))
+
+
+def _viewpoint(source, entry) -> np.ndarray | None:
+    """The sensor origin of ``VIEWPOINT tx ty tz qw qx qy qz``; the rotation does not move
+    it, so only the translation is kept."""
+    if entry is None:
+        return None
+    vals, line = entry
+    try:
+        vp = np.array([float(v) for v in vals], dtype=np.float64)
+    except ValueError:
+        raise FormatError(source, "VIEWPOINT needs 7 numbers (tx ty tz qw qx qy qz), got "
+                                  f"{' '.join(vals)[:80]!r}", line=line) from None
+    if vp.size != 7 or not np.isfinite(vp).all():
+        raise FormatError(source, "VIEWPOINT needs 7 finite numbers (tx ty tz qw qx qy qz), "
+                                  f"got {vp.size}", line=line)
+    return vp[:3]
 
 
 def read_pcd(data: bytes, source=None) -> PointCloud:
@@ -253,5 +272,11 @@ def _to_cloud(columns, h: PCDHeader, source) -> PointCloud:
                 properties[f"{name}_{j}"] = values[:, j].copy()
     if points.shape[0] == 0 and dropped:
         raise NonFiniteError(source, f"all {dropped} points have a NaN or Inf coordinate")
-    return finish_cloud(source, points, normals=normals, properties=properties,
-                        dropped=dropped, label="point")
+    cloud = finish_cloud(source, points, normals=normals, properties=properties,
+                         dropped=dropped, label="point")
+    # Positions in the file (row-major grid cells of an organized scan), holes included.
+    cloud.index = np.flatnonzero(keep).astype(np.int64) if dropped else None
+    cloud.grid = (h.width, h.height) if h.height > 1 else None
+    if h.viewpoint is not None:
+        cloud.viewpoint, cloud.viewpoint_source = h.viewpoint, "PCD VIEWPOINT"
+    return cloud

@@ -25,6 +25,10 @@ from .tokens import number_texts
 
 NORMAL_NAMES = (("nx", "ny", "nz"), ("normal_x", "normal_y", "normal_z"))
 FACE_LISTS = ("vertex_indices", "vertex_index")
+# Written under their own names (viewers know them); every other column gets SCALAR_PREFIX.
+STANDARD_NAMES = frozenset({"x", "y", "z", "nx", "ny", "nz", "red", "green", "blue", "alpha",
+                            "intensity", "quality"})
+SCALAR_PREFIX = "scalar_"
 _CHUNK_ROWS = 65536
 
 
@@ -69,9 +73,12 @@ def read_ply(data: bytes, source=None) -> PointCloud:
             normals = np.stack([cols[n] for n in names], axis=1).astype(np.float64)
             used.update(names)
             break
-    properties = {k: v for k, v in cols.items() if k not in used}
+    properties = unprefixed({k: v for k, v in cols.items() if k not in used})
     cloud = finish_cloud(source, points, normals=normals, properties=properties,
                          where=vertex.where, label="vertex")
+    cloud.viewpoint = header_viewpoint(header.comments, source)
+    if cloud.viewpoint is not None:
+        cloud.viewpoint_source = "PLY viewpoint comment"
     face = elements.get("face")
     if face is not None:
         name = next((n for n in FACE_LISTS if n in face.lists), None)
@@ -85,6 +92,43 @@ def read_ply(data: bytes, source=None) -> PointCloud:
                 items = items.astype(np.int64)
             cloud.faces = triangulate(source, counts, items, len(cloud), where=face.where)
     return cloud
+
+
+def header_viewpoint(comments: list[str], source) -> np.ndarray | None:
+    """The scanner position of a ``comment viewpoint x y z`` (or ``obj_info viewpoint``)
+    line, as (3,) float64; None when there is none.
+
+    Raises
+    ------
+    FormatError
+        The line does not hold three finite numbers.
+    """
+    for text in comments:
+        tok = text.split()
+        if not tok or tok[0].lower() != "viewpoint":
+            continue
+        try:
+            vp = np.array([float(v) for v in tok[1:]], dtype=np.float64)
+        except ValueError:
+            vp = np.empty(0)
+        if vp.size != 3 or not np.isfinite(vp).all():
+            raise FormatError(source, "the header's viewpoint comment needs three finite "
+                                      f"numbers 'viewpoint x y z', got {text[:80]!r}")
+        return vp
+    return None
+
+
+def unprefixed(properties: dict) -> dict:
+    """Properties with the ``scalar_`` prefix (ours, CloudCompare's) taken off the names,
+    where that names no other property; our own ``quality`` copy of ``mean`` is dropped."""
+    out = {}
+    for name, values in properties.items():
+        bare = name[len(SCALAR_PREFIX):] if name.startswith(SCALAR_PREFIX) else name
+        out[bare if bare not in properties else name] = values
+    if "quality" in out and "mean" in out and np.array_equal(
+            out["quality"], np.asarray(out["mean"], dtype=np.float32), equal_nan=True):
+        del out["quality"]
+    return out
 
 
 def _ply_column(arr: np.ndarray) -> tuple[str, np.ndarray]:
@@ -105,9 +149,27 @@ def _ply_column(arr: np.ndarray) -> tuple[str, np.ndarray]:
     return "double", arr.astype(np.float64)
 
 
+def ply_name(name: str) -> str:
+    """Property name a viewer recognises: standard names as they are, others ``scalar_*``.
+
+    CloudCompare loads a vertex property as a named scalar field only when it is called
+    ``scalar_<name>`` (or is a standard one: coordinates, normals, colours, intensity); it
+    shows the field as ``<name>``. Measured with Debian's CloudCompare 2.11 (command line).
+    """
+    return name if name in STANDARD_NAMES or name.startswith(SCALAR_PREFIX) \
+        else SCALAR_PREFIX + name
+
+
 def write_ply(fh: BinaryIO, table: Table, *, binary: bool = True) -> None:
-    """Write ``table`` as PLY (binary little endian, or ascii when ``binary=False``)."""
-    columns = [(name, *_ply_column(np.asarray(arr))) for name, arr in table.columns()]
+    """Write ``table`` as PLY (binary little endian, or ascii when ``binary=False``).
+
+    Curvature and attribute columns are named ``scalar_<name>`` (see :func:`ply_name`) and
+    mean curvature is repeated as ``quality``, the one per-vertex scalar MeshLab loads.
+    """
+    named = [(ply_name(name), arr) for name, arr in table.columns()]
+    if "mean" in table.fields and "quality" not in table.fields:
+        named.append(("quality", np.asarray(table.fields["mean"], dtype=np.float32)))
+    columns = [(name, *_ply_column(np.asarray(arr))) for name, arr in named]
     faces = table.faces
     if faces is not None and faces.max(initial=0) > np.iinfo(np.int32).max:
         raise FormatError(None, "face indices do not fit PLY 'int'")
@@ -116,6 +178,9 @@ def write_ply(fh: BinaryIO, table: Table, *, binary: bool = True) -> None:
     for key, value in table.info.items():
         if isinstance(value, str | int | float | bool) and "\n" not in str(value):
             head.append(f"comment {key} {value}")
+    vp = table.info.get("viewpoint")
+    if isinstance(vp, list | tuple) and len(vp) == 3:
+        head.append("comment viewpoint " + " ".join(repr(float(v)) for v in vp))
     head.append(f"element vertex {table.n}")
     head += [f"property {ptype} {name}" for name, ptype, _ in columns]
     if faces is not None:

@@ -208,7 +208,8 @@ def test_plan_measures_spacing_and_noise():
 def test_preset_paper_is_territory_claiming_with_ten_neighbors():
     cloud = synthetic.torus(3000, seed=13)
     paper = curvature.estimate(cloud.points, preset="paper")
-    tc = curvature.estimate(cloud.points, "tc", fit="implicit", min_neighbors=10)
+    tc = curvature.estimate(cloud.points, "tc", fit="implicit", min_neighbors=10,
+                            candidates=30)
     for name, arr in tc.fields().items():
         np.testing.assert_array_equal(paper.fields()[name], arr, err_msg=name)
     assert paper.info["preset"] == "paper" and paper.info["params"]["min_neighbors"] == 10

@@ -156,8 +156,8 @@ def assert_same_result(a: CurvatureResult, b: CurvatureResult, faces=True):
 
 def test_format_names_and_extension_dispatch():
     assert set(FORMATS_READ) == {"ply", "pcd", "xyz", "csv", "txt", "asc", "npy", "npz",
-                                 "obj", "stl", "off"}
-    assert FORMATS_WRITE == ("ply", "csv", "npz", "json")
+                                 "obj", "stl", "off", "las", "laz", "e57"}
+    assert FORMATS_WRITE == ("ply", "csv", "npz", "json", "las", "laz")
     assert format_from_path("a/b/SCAN.PLY") == "ply"
     assert format_from_path("x.Json") == "json"
     assert curvature.read is read and curvature.write is write
@@ -181,20 +181,21 @@ def test_result_ply_round_trip(tmp_path, binary):
     head = path.read_bytes()[:2000].split(b"end_header")[0].decode()
     assert ("binary_little_endian" in head) == binary
     names = [ln.split()[-1] for ln in head.splitlines() if ln.startswith("property ")]
-    assert names == ["x", "y", "z", "nx", "ny", "nz", "k1", "k2", "mean", "gaussian",
-                     "d1x", "d1y", "d1z", "d2x", "d2y", "d2z", "residual", "neighbor_count",
-                     "status", "vertex_indices"]
-    assert "property double residual" in head and "property int neighbor_count" in head
-    assert "property char status" in head
+    fields = ["k1", "k2", "mean", "gaussian", "d1x", "d1y", "d1z", "d2x", "d2y", "d2z",
+              "residual", "neighbor_count", "status", "shape_index", "curvedness", "index"]
+    # CloudCompare loads only standard names and scalar_*; MeshLab only quality.
+    assert names == ["x", "y", "z", "nx", "ny", "nz", *(f"scalar_{f}" for f in fields),
+                     "quality", "vertex_indices"]
+    assert "property double scalar_residual" in head
+    assert "property int scalar_neighbor_count" in head
+    assert "property uchar scalar_status" in head
     assert "property list uchar int vertex_indices" in head
     cloud = read(path)
-    assert set(cloud.properties) == {"k1", "k2", "mean", "gaussian", "d1x", "d1y", "d1z",
-                                     "d2x", "d2y", "d2z", "residual", "neighbor_count",
-                                     "status"}
+    assert set(cloud.properties) == set(fields)
     np.testing.assert_array_equal(cloud.points, res.points)
     np.testing.assert_array_equal(cloud.normals, res.normals)
     np.testing.assert_array_equal(cloud.properties["d2y"], res.dir2[:, 1])
-    assert cloud.properties["status"].dtype == np.int8
+    assert cloud.properties["status"].dtype == np.uint8
     assert cloud.properties["neighbor_count"].dtype == np.int32
     assert_same_result(res, read_result(path))
 
@@ -205,7 +206,7 @@ def test_result_csv_round_trip(tmp_path):
     write(path, res)
     lines = path.read_text().splitlines()
     assert lines[0] == ("x,y,z,nx,ny,nz,k1,k2,mean,gaussian,d1x,d1y,d1z,d2x,d2y,d2z,"
-                        "residual,neighbor_count,status")
+                        "residual,neighbor_count,status,shape_index,curvedness,index")
     assert len(lines) == 31 and "nan" in lines[3].split(",")
     assert_same_result(res, read_result(path), faces=False)
 
@@ -216,8 +217,9 @@ def test_result_npz_round_trip(tmp_path):
     write(path, res)
     with np.load(path) as z:
         assert set(z.files) == {"points", "normals", "k1", "k2", "mean", "gaussian", "dir1",
-                                "dir2", "residual", "neighbor_count", "status", "faces"}
-        assert z["dir1"].shape == (30, 3) and z["status"].dtype == np.int8
+                                "dir2", "residual", "neighbor_count", "status", "faces",
+                                "shape_index", "curvedness", "index"}
+        assert z["dir1"].shape == (30, 3) and z["status"].dtype == np.uint8
     cloud = read(path)
     np.testing.assert_array_equal(cloud.properties["d1z"], res.dir1[:, 2])
     assert_same_result(res, read_result(path))
@@ -264,7 +266,8 @@ def test_result_json(tmp_path):
     assert doc["n"] == 30
     fields = doc["fields"]
     assert list(fields) == ["points", "normals", "k1", "k2", "mean", "gaussian", "dir1",
-                            "dir2", "residual", "neighbor_count", "status"]
+                            "dir2", "residual", "neighbor_count", "status", "shape_index",
+                            "curvedness", "index"]
     assert fields["k1"][2] is None and fields["k1"][0] == res.k1[0]
     assert fields["dir1"][7] == [None, None, None]
     assert fields["points"][5] == res.points[5].tolist()
@@ -322,6 +325,8 @@ def test_plain_array_every_write_format(tmp_path):
         write(path, pts)
         if fmt == "json":
             assert json.loads(path.read_text())["fields"]["points"] == pts.tolist()
+        elif fmt in ("las", "laz"):  # int32 coordinates, scaled
+            np.testing.assert_allclose(read(path).points, pts, atol=1e-5)
         else:
             np.testing.assert_array_equal(read(path).points, pts)
 

@@ -73,14 +73,14 @@ def err(data, fmt, match=None) -> FormatError:
 # --- names, empty files, too few points ---------------------------------------------------
 
 def test_unknown_extension(tmp_path):
-    path = tmp_path / "scan.las"
+    path = tmp_path / "scan.rcs"
     path.write_bytes(b"whatever")
-    with pytest.raises(UnknownFormatError, match=r"scan\.las.*'\.las'.*ply"):
+    with pytest.raises(UnknownFormatError, match=r"scan\.rcs.*'\.rcs'.*ply"):
         read(path)
     with pytest.raises(UnknownFormatError, match="no extension"):
         format_from_path("README")
-    with pytest.raises(UnknownFormatError, match="cannot read format 'las'"):
-        read_bytes(b"x", "las")
+    with pytest.raises(UnknownFormatError, match="cannot read format 'rcs'"):
+        read_bytes(b"x", "rcs")
     assert issubclass(UnknownFormatError, FormatError) and issubclass(FormatError, ValueError)
 
 

@@ -37,7 +37,7 @@ def test_methods_lists_every_core_method_with_bounds(client):
     assert solver["choices"] == ["taubin", "algebraic"]
     assert not any(p["name"] == "solver" for p in fits["monge"]["parameters"])
     assert doc["orientations"] == list(curvature.ORIENTATIONS)
-    assert doc["result_formats"] == ["json", "ply", "csv", "npz"]
+    assert doc["result_formats"] == ["json", "ply", "csv", "npz", "las", "laz"]
     assert "ply" in doc["input_formats"]
 
 
