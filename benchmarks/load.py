@@ -356,7 +356,9 @@ def run(jobs: int, points: int, keys: int, workers: int, timeout: float,
             sampler = MemorySampler(server.pid)
             sampler.start()
             client = subprocess.run(
-                [sys.executable, __file__, "client", "--url", url, "--keys", ",".join(key_list),
+                # "--keys=" form: a generated key may start with "-", which argparse would
+                # take for an option
+                [sys.executable, __file__, "client", "--url", url, "--keys=" + ",".join(key_list),
                  "--jobs", str(jobs), "--points", str(points), "--timeout", str(timeout)],
                 capture_output=True, text=True, timeout=timeout + 60)
             sampler.stop()

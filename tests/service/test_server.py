@@ -136,8 +136,9 @@ def test_jobs_survive_sigkill_and_restart(tmp_path):
         for job_id, state in states.items():
             job = second.client.get(f"/v1/jobs/{job_id}").json()
             assert job["attempts"] == 1, (state, job)
-            # A job seen queued may have started in the moment before the kill.
-            assert job["restarts"] in ((1,) if state == "running" else (0, 1)), (state, job)
+            # A job seen queued may have started in the moment before the kill, and one seen
+            # running may have finished in it.
+            assert job["restarts"] in (0, 1), (state, job)
         again = second.client.get(f"/v1/jobs/{done['id']}/result?format=ply")
         assert again.status_code == 200 and again.content == before
     finally:
