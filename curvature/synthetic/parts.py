@@ -122,7 +122,11 @@ def _finish_part(name, params, rng, geometry, labels, names, area, *, noise, noi
 
 
 def _box_faces(rng, counts, half, r):
-    """Flat faces of the rounded box: the inner box's faces pushed out by the fillet."""
+    """Flat faces of the rounded box: the inner box's faces pushed out by the fillet.
+
+    Each box piece is returned as (points, normals, principal directions or None, distance to
+    the nearest curvature jump).
+    """
     out = []
     for f, m in enumerate(counts):
         axis, sign = divmod(f, 2)
@@ -135,7 +139,7 @@ def _box_faces(rng, counts, half, r):
         nrm = np.zeros((m, 3))
         nrm[:, axis] = sign
         dist = np.minimum(half[j] - np.abs(x[:, j]), half[k] - np.abs(x[:, k]))
-        out.append((x, nrm, np.zeros(m), np.zeros(m), dist))
+        out.append((x, nrm, None, dist))
     return out
 
 
@@ -162,7 +166,7 @@ def _box_fillets(rng, counts, half, r):
         along = np.zeros((m, 3))
         along[:, axis] = 1.0
         dist = np.minimum(np.minimum(alpha, np.pi / 2.0 - alpha) * r, half[axis] - np.abs(t))
-        out.append((base + r * nrm, nrm, (around, along), None, dist))
+        out.append((base + r * nrm, nrm, (around, along), dist))
     return out
 
 
@@ -175,7 +179,7 @@ def _box_corners(rng, counts, half, r):
         u /= np.linalg.norm(u, axis=1)[:, None]
         nrm = u * signs
         dist = r * np.arcsin(np.clip(u.min(axis=1), 0.0, 1.0))
-        out.append((signs * half + r * nrm, nrm, None, None, dist))
+        out.append((signs * half + r * nrm, nrm, None, dist))
     return out
 
 
@@ -224,7 +228,7 @@ def filleted_box(n=12000, size=(2.0, 1.5, 1.0), fillet=0.2, *, noise=0.0, noise_
               + _box_corners(rng, counts[18:], half, r))
     clean, normals, k1, k2, dir1, dir2, fdist, labels, piece = ([] for _ in range(9))
     inv = 1.0 / r
-    for index, (x, nrm, dirs, _, dist) in enumerate(pieces):
+    for index, (x, nrm, dirs, dist) in enumerate(pieces):
         m = x.shape[0]
         if index < 6:
             kk = (np.zeros(m), np.zeros(m), np.full((m, 3), np.nan), np.full((m, 3), np.nan))
