@@ -40,10 +40,12 @@ identical for any point order and any ``workers``.
 from __future__ import annotations
 
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
+import numba
 import numpy as np
 from numba import njit
+from scipy.spatial import cKDTree
 
 from .fitting import scale_selection
 from .fitting.kernels import FIT_IMPLICIT, FIT_MONGE, SOLVER_TAUBIN, fit_batch
@@ -58,6 +60,7 @@ from .fitting.outliers import off_surface
 from .fitting.scale_selection import KIND_MONGE, multiscale_anchor_fits
 from .neighborhoods.kdtree import build_tree, knn_parallel
 from .params import ParamSpec
+from .sampling import cell_ijk, grid_keys, thinned
 from .status import Status
 
 AUTO_PARAMS = (
@@ -76,6 +79,10 @@ AUTO_PARAMS = (
               help="per-anchor neighborhood size on noisy clouds: of the fits over 24, 48, 96, "
                    "192 and k neighbors, the largest whose curvature agrees with every smaller "
                    "one within this many standard errors (0: every anchor uses k)"),
+    ParamSpec("dense_noise", float, 0.45, 0.0, 1e6,
+              help="relative noise above which the fits see the means of grid cells of the "
+                   "cloud instead of its points, so a denser scan covers a larger patch with "
+                   "the same neighbors (large: never)"),
     ParamSpec("noise_threshold", float, 0.01, 0.0, 1.0,
               help="relative noise (RMS residual / spacing) below which a cloud counts as clean "
                    "and gets the implicit quadric over 24 neighbors"),
@@ -98,6 +105,15 @@ CLEAN_RESIDUAL_RATIO = 50.0
 # noisy fits' SUPPORT: a leading edge of 3.5 spacings reads 0.53 over 24 neighbors, while the
 # implicit quadrics that straddle a fillet's edge read 1.5 and more.
 CLEAN_SUPPORT = 1.0
+# Dense noisy clouds (relative wide noise above ``dense_noise``) are fitted on a random share
+# of their points with relative wide noise DENSE_TARGET, whose normals come from the whole
+# cloud: there a fixed neighbor count covers the patch it covers on a cloud of the right
+# density, and the normals average more points than that cloud has.
+DENSE_TARGET = 0.2
+# Neighbors of the wide noise measurement (AutoPlan.wide_noise).
+DENSE_K = 192
+# Most neighbors of the thinned cloud's stage-1 normals.
+DENSE_NORMAL_K = 1024
 
 
 @dataclass(frozen=True)
@@ -118,6 +134,14 @@ class AutoPlan:
         Anchor grid cell size.
     points : int
         Points of the whole cloud (``max_share`` is a share of them).
+    wide_noise : float
+        Relative noise measured over :data:`DENSE_K` neighbors, against the spacing their
+        patch's area gives (NaN on clean clouds): unlike ``noise`` it does not saturate where
+        the noise exceeds the spacing.
+    dense_share : float
+        Share of the points the fits see (1: all; :class:`AutoRun` ``_dense``).
+    dense : AutoPlan or None
+        The plan of that thinned cloud.
     """
 
     spacing: float
@@ -126,27 +150,12 @@ class AutoPlan:
     origin: tuple
     cell: float
     points: int
+    wide_noise: float = np.nan
+    dense_share: float = 1.0
+    dense: AutoPlan | None = None
 
     def to_dict(self) -> dict:
         return asdict(self)
-
-
-@njit(cache=True)
-def _cell_ijk(p, origin, cell, t):
-    """Grid index of coordinate ``p`` along axis ``t`` (clamped at 0)."""
-    return max(np.int64(np.floor((p - origin[t]) / cell)), 0)
-
-
-@njit(cache=True)
-def _grid_keys(points, origin, cell):
-    """One integer key per point naming its grid cell (21 bits an axis), shape (n,)."""
-    n = points.shape[0]
-    key = np.empty(n, np.int64)
-    for i in range(n):
-        key[i] = ((_cell_ijk(points[i, 0], origin, cell, 0) << 42)
-                  | (_cell_ijk(points[i, 1], origin, cell, 1) << 21)
-                  | _cell_ijk(points[i, 2], origin, cell, 2))
-    return key
 
 
 @njit(cache=True)
@@ -178,7 +187,7 @@ def _cell_representatives(points, cells, cell_of, origin, cell, avoid):
         c = cell_of[i]
         d = 0.0
         for t in range(3):
-            center = origin[t] + (_cell_ijk(points[i, t], origin, cell, t) + 0.5) * cell
+            center = origin[t] + (cell_ijk(points[i, t], origin, cell, t) + 0.5) * cell
             d += (points[i, t] - center) ** 2
         b = best[c]
         if b >= 0 and avoid[i] != avoid[b]:
@@ -218,7 +227,7 @@ def grid_cells(points: np.ndarray, origin: np.ndarray, cell: float,
     """
     origin = np.asarray(origin, np.float64)
     # Keys in one pass (no (n, 3) temporaries: this runs on whole 10M-point clouds).
-    ukeys, cell_of = np.unique(_grid_keys(points, origin, float(cell)), return_inverse=True)
+    ukeys, cell_of = np.unique(grid_keys(points, origin, float(cell)), return_inverse=True)
     cell_of = cell_of.ravel()
     if avoid is None:
         avoid = np.zeros(points.shape[0], np.bool_)
@@ -253,7 +262,8 @@ def knn_csr(points: np.ndarray, tree: tuple, idx: np.ndarray, k: int):
     return np.arange(0, (m + 1) * k, k, dtype=np.int64), nbr.ravel(), d2
 
 
-def plan_auto(points: np.ndarray, tree: tuple, noise_threshold: float) -> AutoPlan:
+def plan_auto(points: np.ndarray, tree: tuple, noise_threshold: float,
+              dense_noise: float = np.inf) -> AutoPlan:
     """Measure spacing and noise on a geometric subsample of the cloud.
 
     Parameters
@@ -264,6 +274,9 @@ def plan_auto(points: np.ndarray, tree: tuple, noise_threshold: float) -> AutoPl
         :func:`~curvature.neighborhoods.kdtree.build_tree` over ``points``.
     noise_threshold : float
         Relative noise below which the cloud counts as clean.
+    dense_noise : float
+        Relative noise above which the fits see a thinned cloud (:data:`DENSE_TARGET`); its
+        own plan is measured on the whole cloud thinned.
 
     Returns
     -------
@@ -282,9 +295,35 @@ def plan_auto(points: np.ndarray, tree: tuple, noise_threshold: float) -> AutoPl
     noise = float(np.median(residual)) / spacing if residual.size and spacing > 0 else np.inf
     if not spacing > 0.0:  # every point coincides with its 24 nearest: any cell works
         spacing = coarse_cell(points, PLAN_CELLS)
-    return AutoPlan(spacing=spacing, noise=noise, clean=bool(noise < noise_threshold),
+    plan = AutoPlan(spacing=spacing, noise=noise, clean=bool(noise < noise_threshold),
                     origin=tuple(float(v) for v in origin), cell=ANCHOR_CELL * spacing,
                     points=int(points.shape[0]))
+    if plan.clean or not np.isfinite(dense_noise) or points.shape[0] <= DENSE_K:
+        return plan
+    # Where the noise is comparable to the spacing the 24 nearest neighbors lie within the
+    # noise and say little of either; over DENSE_K neighbors the patch is far wider than the
+    # noise, the fit's residual is the noise and the patch's area gives the true spacing.
+    indptr, indices, d2 = knn_csr(points, tree, sample, DENSE_K)
+    fit_batch(points, sample, indptr, indices, FIT_MONGE, SOLVER_TAUBIN, True, *outs)
+    residual = outs[5][outs[6] == Status.OK]
+    wide_spacing = float(np.median(np.sqrt(d2[:, -1]))) * np.sqrt(PLAN_K / DENSE_K)
+    if not (residual.size and wide_spacing > 0.0):
+        return plan
+    wide_noise = float(np.median(residual)) / wide_spacing
+    plan = replace(plan, wide_noise=wide_noise)
+    if not wide_noise > dense_noise:
+        return plan
+    # Thinned by t, the relative noise falls as 1 / sqrt(t) (same noise, sqrt(t) the spacing).
+    share = (DENSE_TARGET / wide_noise) ** 2
+    if share >= 1.0:
+        return plan
+    keep = np.ones(points.shape[0], np.bool_)
+    thinned(points, share, keep)
+    kept = points[keep]
+    if kept.shape[0] <= DENSE_K:
+        return plan
+    dense = plan_auto(kept, build_tree(kept), noise_threshold)
+    return replace(plan, dense_share=float(share), dense=replace(dense, clean=False))
 
 
 class AutoRun:
@@ -315,8 +354,8 @@ class AutoRun:
         self.progress = progress
         t0 = time.perf_counter()
         self.tree = build_tree(points)
-        self.plan = plan_auto(points, self.tree, params["noise_threshold"]) if plan is None \
-            else plan
+        self.plan = plan_auto(points, self.tree, params["noise_threshold"],
+                              params["dense_noise"]) if plan is None else plan
         self.timings: dict[str, float] = {"plan": time.perf_counter() - t0}
         self.track_reach = track_reach
         self.reach: np.ndarray | None = None
@@ -331,6 +370,10 @@ class AutoRun:
         self._done = 0
         t0 = time.perf_counter()
         field, radius = self._stage1(res, graph, k_stage1)
+        if self.plan.dense is not None:
+            self.timings["stage1"] = time.perf_counter() - t0
+            self._dense(res)
+            return
         # Anchors among the inliers (an outlier cannot anchor its cell's fits); outliers'
         # normals are left out of every fit.
         reps, owner = grid_cells(self.points, np.asarray(self.plan.origin), self.plan.cell,
@@ -437,9 +480,77 @@ class AutoRun:
             res.status[rows] = Status.DEGENERATE_FIT
 
     def _anchored(self, res, field, r_normal, reps, owner, kc) -> None:
-        """Two passes of anchored normal fits over ``kc`` neighbors of every anchor."""
-        points = self.points
-        query = np.arange(points.shape[0], dtype=np.int64)
+        """Two passes of anchored normal fits over ``kc`` neighbors of every anchor, read at
+        every point."""
+        fits, fit_reach, chosen = self._model(field, r_normal, reps, owner, kc)
+        query = np.arange(self.points.shape[0], dtype=np.int64)
+        t0 = time.perf_counter()
+        for sl in self._chunks(query.shape[0]):
+            out = _OutputView(res, query[sl])
+            nfr_from_anchors(self.points, query[sl], owner[sl], reps, *fits, *out.arrays)
+            out.store(chosen[owner[sl]])
+            self._tick(sl.stop - sl.start)
+        self.timings["pass2"] += time.perf_counter() - t0
+        if self.track_reach:
+            self.reach = self._point_reach(reps, owner, fit_reach)
+
+    def _dense(self, res) -> None:
+        """Fits on a thinned share of a dense noisy cloud (``plan.dense``), read at every point.
+
+        The thinned points run the noisy branch as a cloud of their own, with stage-1 normals
+        over as many of the whole cloud's points as the share leaves out (normal_k / share),
+        so they average more points than the thinned cloud holds; each point reads the model
+        of its nearest thinned point's anchor at its own position.
+        """
+        n = self.points.shape[0]
+        share = self.plan.dense_share
+        keep = ~self.outliers
+        thinned(self.points, share, keep)
+        idx = np.flatnonzero(keep)
+        sub = np.ascontiguousarray(self.points[idx])
+        inner = AutoRun(sub, self.params, self.chunk_size, None, plan=self.plan.dense,
+                        track_reach=self.track_reach)
+        inner._tick = self._tick  # its work counts towards this run's progress
+        ns = idx.shape[0]
+        self._total += ns
+        # Stage-1 normals of the thinned points over the whole cloud's neighbors.
+        k = min(int(round(self.params["normal_k"] / share)), DENSE_NORMAL_K, n - 1)
+        field, r_normal = np.empty((ns, 3)), np.empty(ns)
+        step = max(64, self.chunk_size * 24 // k)  # neighbor entries of a 24-neighbor chunk
+        for sl in (slice(i, min(i + step, ns)) for i in range(0, ns, step)):
+            indptr, indices, d2 = knn_csr(self.points, self.tree, idx[sl], k)
+            r_normal[sl] = np.sqrt(d2[:, -1])
+            pca_normals(self.points, idx[sl], indptr, indices, field[sl])
+            self._tick(sl.stop - sl.start)
+        reps, owner = grid_cells(sub, np.asarray(inner.plan.origin), inner.plan.cell)
+        self._total += 2 * reps.shape[0]
+        fits, fit_reach, chosen = inner._model(field, r_normal, reps, owner,
+                                               min(inner.fit_k(), ns - 1))
+        for name, sec in inner.timings.items():
+            self.timings[f"dense {name}"] = sec
+        t0 = time.perf_counter()
+        # (scipy's tree: queries at points that are not in the tree's cloud)
+        _, nearest = cKDTree(sub).query(self.points, k=1, workers=numba.get_num_threads())
+        anchor_of = owner[nearest]
+        # Thinned points first, then the cloud: one array holds anchors and readers.
+        both = np.concatenate([sub, self.points])
+        for sl in self._chunks(n):
+            query = np.arange(sl.start, sl.stop, dtype=np.int64)
+            out = _OutputView(res, query)
+            nfr_from_anchors(both, ns + query, anchor_of[sl], reps, *fits, *out.arrays)
+            # A kept fit over s thinned points spans the patch of s / share points.
+            out.store(np.rint(chosen[anchor_of[sl]] / share).astype(np.int64))
+            self._tick(sl.stop - sl.start)
+        self.timings["dense read"] = time.perf_counter() - t0
+        if self.track_reach:
+            # As :meth:`_point_reach`, plus the distance to the nearest thinned point, which
+            # decides the anchor.
+            d = np.linalg.norm(self.points - sub[reps[anchor_of]], axis=1)
+            self.reach = 2.0 * d + fit_reach[anchor_of] + np.sqrt(3.0) * inner.plan.cell
+
+    def _model(self, field, r_normal, reps, owner, kc):
+        """The anchors' fits of both passes: the first refines the normals, the second fits
+        them; returns the second pass's fits, their reach and sizes (:meth:`_fit_anchors`)."""
         # How far the first pass's normal of each point depends on: its anchor's fit reads
         # stage-1 normals of the anchor's neighbors, each made from their own neighbors.
         w = r_normal
@@ -448,21 +559,14 @@ class AutoRun:
             # Pass 1 only refines normals: Monge rungs would tilt them by their noisy curvature
             # over a cell's width, so its ladder has the normal-fit rungs only.
             fits, fit_reach, chosen = self._fit_anchors(reps, field, kc, w, positional=last)
-            if last:
-                for sl in self._chunks(query.shape[0]):
-                    out = _OutputView(res, query[sl])
-                    nfr_from_anchors(points, query[sl], owner[sl], reps, *fits, *out.arrays)
-                    out.store(chosen[owner[sl]])
-                    self._tick(sl.stop - sl.start)
-            else:
+            if not last:
                 # Refined normals of every point: the first pass's field at the point.
                 field = self._refined_field(field, reps, owner, fits)
-            if self.track_reach:
-                w = self._point_reach(reps, owner, fit_reach)
+                if self.track_reach:
+                    w = self._point_reach(reps, owner, fit_reach)
             name = "pass2" if last else "pass1"
             self.timings[name] = self.timings.get(name, 0.0) + time.perf_counter() - t0
-        if self.track_reach:
-            self.reach = w
+        return fits, fit_reach, chosen
 
     def _fallback(self, res, field, r_normal, reps, owner, k, failed) -> None:
         """One anchored pass over ``k`` neighbors on the stage-1 normals, for failed points.

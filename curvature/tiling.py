@@ -274,7 +274,8 @@ class TiledRun:
         n = self.spts.shape[0]
         tree = build_tree(self.spts)
         threshold = self.req.auto_params.get("noise_threshold", 0.01)
-        self.plan = plan_auto(self.spts, tree, threshold)
+        self.plan = plan_auto(self.spts, tree, threshold,
+                              self.req.auto_params.get("dense_noise", math.inf))
         if self.req.method == "mesh":
             finder = make_finder(self.spts, "mesh", faces=self.s_faces, **self.req.method_params)
             finder._nbtree = tree

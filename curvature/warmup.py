@@ -106,6 +106,8 @@ def steps() -> Iterator[Step]:
     """Every run the warm-up makes, as ``(label, call)``."""
     clean = synthetic.torus(1500, seed=1)
     noisy = synthetic.torus(1500, noise=1.0, seed=2)
+    # relative wide noise about 0.46: thinned to a fifth with dense_noise=0.25
+    dense = synthetic.torus(4000, noise=2.0, seed=3)
     for workers in (1, 2):
         def run(*args, _w=workers, **kw):
             return lambda: estimate(*args, workers=_w, **kw)
@@ -116,6 +118,7 @@ def steps() -> Iterator[Step]:
         yield f"auto clean, {threads}", run(clean.points)
         yield f"auto noisy, {threads}", run(noisy.points)
         yield f"auto noisy at one scale, {threads}", run(noisy.points, scale_gamma=0.0)
+        yield f"auto dense, {threads}", run(dense.points, dense_noise=0.25)
         for fit, extra in (("implicit", {}), ("implicit", {"solver": "algebraic"}),
                            ("monge", {}), ("nfr", {"k": 60})):
             yield (f"knn {fit} {extra or ''}, {threads}",
