@@ -25,21 +25,20 @@ def main() -> None:
     parser.add_argument("--noise", type=float, default=0.25)
     parser.add_argument("--shapes", nargs="+", default=["torus", "sphere", "bezier"])
     args = parser.parse_args()
-    print("shape    points   scale_gamma  mean|k1 err|  mean|k2 err|  seconds")
+    print("shape    points   variant      mean|k1 err|  mean|k2 err|  seconds  wide_noise  share")
     for shape in args.shapes:
         for n in args.sizes:
             cloud = synthetic.make(shape, n, noise=args.noise, seed=1)
             m = cloud.interior
-            for gamma in (None, 0.0):
-                params = {} if gamma is None else {"scale_gamma": gamma}
+            for label, params in (("default", {}), ("dense off", {"dense_noise": 1e6})):
                 t0 = time.perf_counter()
                 res = curvature.estimate(cloud.points, normals=cloud.normals, **params)
                 dt = time.perf_counter() - t0
                 e1 = np.nanmean(np.abs(res.k1 - cloud.k1)[m])
                 e2 = np.nanmean(np.abs(res.k2 - cloud.k2)[m])
-                label = "default" if gamma is None else "0"
-                print(f"{shape:8} {n:8d}   {label:11}  {e1:12.4f}  {e2:12.4f}  {dt:7.1f}",
-                      flush=True)
+                plan = res.info["plan"]
+                print(f"{shape:8} {n:8d}   {label:11}  {e1:12.4f}  {e2:12.4f}  {dt:7.1f}"
+                      f"  {plan['wide_noise']:10.3f}  {plan['dense_share']:5.3f}", flush=True)
 
 
 if __name__ == "__main__":

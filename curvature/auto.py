@@ -58,6 +58,7 @@ from .fitting.normal_field import (
 from .fitting.normal_quadric import N_QUAD
 from .fitting.outliers import off_surface
 from .fitting.scale_selection import KIND_MONGE, multiscale_anchor_fits
+from .fitting.shifted import adopt_neighbor_fits
 from .neighborhoods.kdtree import build_tree, knn_parallel
 from .params import ParamSpec
 from .sampling import cell_ijk, grid_keys, thinned
@@ -105,6 +106,9 @@ CLEAN_RESIDUAL_RATIO = 50.0
 # noisy fits' SUPPORT: a leading edge of 3.5 spacings reads 0.53 over 24 neighbors, while the
 # implicit quadrics that straddle a fillet's edge read 1.5 and more.
 CLEAN_SUPPORT = 1.0
+# A point adopts a neighbor's far better fit (curvature.fitting.shifted) only if it lies on
+# that fit's quadric within this many spacings.
+CLEAN_ON_SURFACE = 1e-7
 # Dense noisy clouds (relative wide noise above ``dense_noise``) are fitted on a random share
 # of their points with relative wide noise DENSE_TARGET, whose normals come from the whole
 # cloud: there a fixed neighbor count covers the patch it covers on a cloud of the right
@@ -384,6 +388,16 @@ class AutoRun:
         if self.track_reach:
             self.reach = radius[1] if self.plan.clean else np.zeros(n)
         if self.plan.clean:
+            t0 = time.perf_counter()
+            reach = np.empty(n)
+            adopt_neighbor_fits(self.points, self.tree, min(PLAN_K, n - 1),
+                                res.residual.copy(), res.neighbor_count.astype(np.int64),
+                                radius[1], CLEAN_EXACT * self.plan.spacing,
+                                CLEAN_ON_SURFACE * self.plan.spacing, *_outputs(res, slice(None)),
+                                res.neighbor_count, reach)
+            self.timings["adopt"] = time.perf_counter() - t0
+            if self.track_reach:
+                self.reach = reach
             failed = np.flatnonzero(res.status != Status.OK)
             if failed.size:  # rare: an implicit fit failed; its cell anchor's field takes over
                 self._fallback(res, field, radius[0], reps, owner, max(kc // 2, 12), failed)
