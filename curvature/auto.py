@@ -56,7 +56,7 @@ from .fitting.normal_field import (
     pca_normals,
 )
 from .fitting.normal_quadric import N_QUAD
-from .fitting.outliers import off_surface
+from .fitting.outliers import ISOLATION_K, isolated, off_surface
 from .fitting.scale_selection import KIND_MONGE, multiscale_anchor_fits
 from .fitting.shifted import adopt_neighbor_fits
 from .neighborhoods.kdtree import build_tree, knn_parallel
@@ -114,6 +114,8 @@ CLEAN_ON_SURFACE = 1e-7
 # cloud: there a fixed neighbor count covers the patch it covers on a cloud of the right
 # density, and the normals average more points than that cloud has.
 DENSE_TARGET = 0.2
+# Neighbors looked at beyond normal_k when the outliers are left out of a stage-1 normal.
+RENORMAL_EXTRA = 16
 # Neighbors of the wide noise measurement (AutoPlan.wide_noise).
 DENSE_K = 192
 # Most neighbors of the thinned cloud's stage-1 normals.
@@ -432,6 +434,7 @@ class AutoRun:
         kp = min(PLAN_K, k)
         r_normal = np.empty(n)
         r_fit = np.empty(n) if self.plan.clean else None
+        r_isolation = np.empty(n)
         for sl in self._chunks(n):
             query = np.arange(sl.start, sl.stop, dtype=np.int64)
             indptr, indices, d2 = knn_csr(self.points, self.tree, query, k)
@@ -442,11 +445,42 @@ class AutoRun:
             pca_normals(self.points, query, *_prefix_csr(nbr, normal_k), field[sl])
             off_surface(self.points, query, np.ascontiguousarray(nbr[:, :normal_k]), field[sl],
                         self.plan.spacing, self.outliers[sl])
+            r_isolation[sl] = np.sqrt(d2[:, min(ISOLATION_K, k) - 1])
             if self.plan.clean:
                 self._clean_fits(res, sl, query, nbr, d2, kp)
                 r_fit[sl] = np.sqrt(d2[:, kp - 1])
             self._tick(2 * (sl.stop - sl.start) if self.plan.clean else sl.stop - sl.start)
+        isolated(self.points, self.tree, r_isolation, self.outliers)
+        self._normals_without_outliers(field, r_normal, normal_k)
         return field, (r_normal, r_fit)
+
+    def _normals_without_outliers(self, field, r_normal, normal_k) -> None:
+        """Stage-1 normals again, without the outliers, where one was among the neighbors.
+
+        One outlier a spacing off a face tilts the PCA normals of every point that has it among
+        its ``normal_k`` neighbors, and the normal fits then read that tilt as curvature.
+        """
+        out = np.flatnonzero(self.outliers)
+        if out.size == 0:
+            return
+        d, _ = cKDTree(self.points[out]).query(self.points, k=1,
+                                                workers=numba.get_num_threads())
+        hit = np.flatnonzero((d <= r_normal) & ~self.outliers).astype(np.int64)
+        k = min(normal_k + RENORMAL_EXTRA, self.points.shape[0] - 1)
+        for start in range(0, hit.size, self.chunk_size):
+            rows = hit[start:start + self.chunk_size]
+            _, indices, d2 = knn_csr(self.points, self.tree, rows, k)
+            nbr = indices.reshape(-1, k)
+            inlier = ~self.outliers[nbr]
+            use = inlier & (np.cumsum(inlier, axis=1) <= normal_k)
+            counts = use.sum(axis=1)
+            indptr = np.zeros(rows.size + 1, np.int64)
+            np.cumsum(counts, out=indptr[1:])
+            normals = np.empty((rows.size, 3))
+            pca_normals(self.points, rows, indptr, nbr[use], normals)
+            field[rows] = normals
+            last = np.where(use, np.sqrt(d2), 0.0).max(axis=1)
+            r_normal[rows] = np.maximum(r_normal[rows], last)
 
     def _clean_fits(self, res, sl, query, nbr, d2, kp) -> None:
         """Implicit quadrics of a chunk of a clean cloud, written to ``res`` rows ``sl``.
@@ -574,8 +608,11 @@ class AutoRun:
             # over a cell's width, so its ladder has the normal-fit rungs only.
             fits, fit_reach, chosen = self._fit_anchors(reps, field, kc, w, positional=last)
             if not last:
-                # Refined normals of every point: the first pass's field at the point.
+                # Refined normals of every point: the first pass's field at the point; the
+                # outliers stay out (a normal given at an off-surface position would bend
+                # the second pass's fits towards it).
                 field = self._refined_field(field, reps, owner, fits)
+                field[self.outliers] = np.nan
                 if self.track_reach:
                     w = self._point_reach(reps, owner, fit_reach)
             name = "pass2" if last else "pass1"

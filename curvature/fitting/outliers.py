@@ -8,9 +8,16 @@ neighbors' own spread along n (their RMS offset from c): p is an outlier when
     |(p - c) . n| > OUTLIER_SIGMAS * thickness + OUTLIER_FLOOR * spacing  (4 and 0.2).
 
 The floor keeps noise-free clouds (thickness 0) from flagging rounding. Curvature sag raises the
-thickness and the offset alike, so fillets are not flagged. Outliers' normals are left out of
-every normal fit and their positions out of the positional fits, so they cannot drag a fit;
-they still get a result of their own.
+thickness and the offset alike, so fillets are not flagged.
+
+An outlier far from every surface (inside a part's volume, say) has no plane to be off: its
+neighbors come from several faces and their spread is wide. It is *isolated* instead: the
+distance to its 8th nearest neighbor exceeds ISOLATION (2.5) times the median of that distance
+over its 8 nearest neighbors (:func:`isolated`). Comparing with the neighbors, not with the
+whole cloud, keeps sparse but genuine regions of a scan (far from the scanner, say) unflagged.
+
+Outliers' normals are left out of every normal fit and their positions out of the positional
+fits, so they cannot drag a fit; they still get a result of their own.
 """
 
 from __future__ import annotations
@@ -18,12 +25,16 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-__all__ = ["OUTLIER_FLOOR", "OUTLIER_SIGMAS", "off_surface"]
+__all__ = ["ISOLATION", "ISOLATION_K", "OUTLIER_FLOOR", "OUTLIER_SIGMAS", "isolated", "off_surface"]
 
 #: Offsets beyond this many neighbor thicknesses are outliers.
 OUTLIER_SIGMAS = 4.0
 #: Plus this share of the point spacing (noise-free clouds have no thickness).
 OUTLIER_FLOOR = 0.2
+#: Neighbors of the isolation test, and how much farther than its neighbors' a point's
+#: ISOLATION_K-th neighbor must be for the point to count as isolated.
+ISOLATION_K = 8
+ISOLATION = 2.5
 
 
 @njit(parallel=True, cache=True)
@@ -63,3 +74,30 @@ def off_surface(points, query, nbr, normals, spacing, out):
         p = query[j]
         off = abs(points[p, 0] * n0 + points[p, 1] * n1 + points[p, 2] * n2 - mean)
         out[j] = off > OUTLIER_SIGMAS * np.sqrt(ss / k) + OUTLIER_FLOOR * spacing
+
+
+def isolated(points: np.ndarray, tree: tuple, reach: np.ndarray, out: np.ndarray) -> None:
+    """Flag the points whose ISOLATION_K-th neighbor is far farther than their neighbors' are.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+    tree : tuple
+        :func:`~curvature.neighborhoods.kdtree.build_tree` over ``points``.
+    reach : ndarray, shape (n,)
+        Distance of every point to its ISOLATION_K-th nearest neighbor.
+    out : ndarray, shape (n,), bool
+        Set True (in place) where a point is isolated; never cleared.
+    """
+    from ..neighborhoods.kdtree import knn_parallel
+
+    # Only points beyond half the threshold of the whole cloud's median can pass it against
+    # their neighbors' unless those are denser than the cloud by more than 2: a cheap filter.
+    cand = np.flatnonzero(reach > 0.5 * ISOLATION * np.median(reach)).astype(np.int64)
+    k = min(ISOLATION_K, points.shape[0] - 1)
+    if cand.size == 0 or k < 1:
+        return
+    nbr = np.empty((cand.size, k), np.int64)
+    knn_parallel(points, tree, cand, k, nbr, np.empty((cand.size, k)))
+    local = np.median(reach[nbr], axis=1)
+    out[cand[reach[cand] > ISOLATION * local]] = True
