@@ -4,14 +4,15 @@
 // /v1/jobs/{id}/result/points/{index}), and compares two jobs side by side or as a difference.
 import { DIVERGING, SEQUENTIAL, categorical, cssColor } from "./colormaps.js";
 import { Histogram } from "./histogram.js";
-import { IDLE_MS, MOVING_BUDGET, PointScene } from "./scene.js";
+import { PointScene } from "./scene.js";
 import { defaultLimits, finiteSorted, histogramDomain } from "./stats.js";
 
 const AXES = { x: [1, 0, 0], "-x": [-1, 0, 0], y: [0, 1, 0], "-y": [0, -1, 0],
   z: [0, 0, 1], "-z": [0, 0, -1] };
 const DEFAULT_FIELD = "mean";
 const CACHED_FIELDS = 4;  // per job: switching back is instant, memory stays bounded
-const CLICK_PIXELS = 4;  // a press and release closer than this is a pick, not a turn
+const CLICK_PIXELS = 4;
+const STATUS_MS = 500;  // a press and release closer than this is a pick, not a turn
 const $ = (id) => document.getElementById(id);
 
 function element(tag, attrs = {}, text) {
@@ -371,13 +372,18 @@ export class ViewerPanel {
     legend.append(bar, ticks);
   }
 
-  describeFrame({ drawn, moving }) {
+  describeFrame({ drawn }) {
     const total = this.scene.views.reduce((sum, v) => sum + v.n, 0);
-    const rule = total > MOVING_BUDGET
-      ? ` While turning, ${MOVING_BUDGET.toLocaleString("en-US")} of them are drawn (a fixed `
-        + `random sample), all again ${IDLE_MS} ms after the camera stops.` : "";
-    $("viewer-status").textContent = `${total.toLocaleString("en-US")} points` +
-      (moving && drawn < total ? ` (${drawn.toLocaleString("en-US")} drawn)` : "") + "." + rule;
+    // At most a few times a second: a text change costs the page a layout and a repaint,
+    // which would slow every frame while the camera turns.
+    const now = performance.now();
+    if (drawn < total && now - (this.described || 0) < STATUS_MS) return;
+    this.described = now;
+    const status = $("viewer-status");
+    status.dataset.drawn = String(drawn);
+    status.textContent = `${total.toLocaleString("en-US")} points` + (drawn < total
+      ? `, ${drawn.toLocaleString("en-US")} drawn so far (a uniform sample; the rest fill in `
+        + "when the camera stops)." : ", all drawn.");
   }
 
   clearPick() {

@@ -9,11 +9,16 @@ import {
 import { OrbitControls } from "three/examples/jsm/controls/OrbitControls.js";
 import { LUT_SIZE, NAN_COLOR } from "./colormaps.js";
 
-// Decimation rule: while the camera moves, at most MOVING_BUDGET points are drawn (in all
-// views together): the first ones of a fixed random order, so a uniform sample of the cloud.
-// Every point is drawn again IDLE_MS after the last movement.
-export const MOVING_BUDGET = 300000;
-export const IDLE_MS = 200;
+// Decimation rule (progressive refinement): the points are stored in a fixed random order and
+// each frame draws the next `chunk` of them (all views together) over the previous frame's
+// picture, so every frame is a uniform sample of the cloud and the picture fills in until
+// every point is drawn. A change of camera, colors or size starts again from the first chunk.
+// The chunk adapts so that a frame takes about FRAME_MS (rAF intervals while drawing): the
+// whole cloud per frame where the GPU allows it, a sample while turning where it does not.
+export const FRAME_MS = 30;
+export const MIN_CHUNK = 10000;
+export const FIRST_CHUNK = 100000;
+const CONTINUOUS_MS = 500;  // frames further apart are not a run: no adaptation
 const NO_VALUE = 3.0e38;  // NaN stand-in in the value attribute: above every float32 value
 const SEED = 12345;
 
@@ -105,10 +110,13 @@ class View {
     this.group.add(this.points);
     this.marker = new Points(new BufferGeometry(), new PointsMaterial({
       color: 0x000000, size: 11, sizeAttenuation: false, depthTest: false }));
-    this.marker.renderOrder = 1;
     this.marker.visible = false;
-    this.group.add(this.marker);
+    this.overlay = new Scene();
+    this.overlayGroup = new Group();
+    this.overlay.add(this.overlayGroup);
+    this.overlayGroup.add(this.marker);
     this.order = null;  // drawn slot -> point index
+    this.drawn = 0;  // slots drawn in the current picture
     this.positions = null;  // original order, Float32Array (3n)
     this.n = 0;
   }
@@ -127,12 +135,11 @@ export class PointScene {
     this.controls.addEventListener("change", () => this.moved());
     this.views = [new View()];
     this.pointSize = 2;
-    this.budget = MOVING_BUDGET;
-    this.moving = false;
-    this.idleTimer = null;
+    this.chunk = FIRST_CHUNK;
+    this.restart = true;
+    this.lastTick = null;  // time of the previous frame of an uninterrupted run of frames
     this.frameRequested = false;
-    this.lastFrameMs = 0;
-    this.lastDrawn = 0;
+    this.frames = 0;
     this.radius = 1;
     this.quaternion = new Quaternion();
     new ResizeObserver(() => this.resize()).observe(canvas);
@@ -144,6 +151,7 @@ export class PointScene {
     while (this.views.length < count) {
       const view = new View();
       view.group.quaternion.copy(this.quaternion);
+      view.overlayGroup.quaternion.copy(this.quaternion);
       this.views.push(view);
     }
     while (this.views.length > count) {
@@ -217,7 +225,10 @@ export class PointScene {
   /** Set the world's up direction and look at the cloud from the iso preset. */
   setUp(up) {
     this.quaternion = upRotation(up);
-    for (const view of this.views) view.group.quaternion.copy(this.quaternion);
+    for (const view of this.views) {
+      view.group.quaternion.copy(this.quaternion);
+      view.overlayGroup.quaternion.copy(this.quaternion);
+    }
     this.frame();
   }
 
@@ -263,53 +274,129 @@ export class PointScene {
   }
 
   moved() {
-    this.moving = true;
-    clearTimeout(this.idleTimer);
-    this.idleTimer = setTimeout(() => { this.moving = false; this.requestRender(); }, IDLE_MS);
     this.requestRender();
   }
 
+  /** Draw again from the first chunk at the next animation frame. */
   requestRender() {
+    this.restart = true;
+    this._schedule();
+  }
+
+  _schedule() {
     if (this.frameRequested) return;
     this.frameRequested = true;
-    requestAnimationFrame(() => { this.frameRequested = false; this.render(); });
+    requestAnimationFrame((now) => {
+      this.frameRequested = false;
+      // Back-to-back frames: the interval is the cost of the previous frame's points.
+      if (this.lastTick !== null && now - this.lastTick < CONTINUOUS_MS) {
+        this._adapt(now - this.lastTick);
+      }
+      const more = this.render();
+      this.lastTick = now;
+      if (more) this._schedule();
+    });
   }
 
-  /** Draw every view; `moving` (default: the camera is moving) limits the points drawn. */
-  render(moving = this.moving) {
-    const start = performance.now();
+  /** The chunk that makes a frame take FRAME_MS at the cost per point just seen. */
+  _adapt(interval) {
+    if (!(interval > 0) || !this.lastChunk) return;
+    const total = this.views.reduce((sum, v) => sum + v.n, 0);
+    const wanted = (FRAME_MS / interval) * this.lastChunk;
+    const bounded = Math.min(2 * this.chunk, Math.max(0.25 * this.chunk, wanted));
+    this.chunk = Math.round(Math.max(MIN_CHUNK, Math.min(Math.max(total, MIN_CHUNK), bounded)));
+  }
+
+  /**
+   * Draw the next chunk of every view (from the first after a change, clearing the picture).
+   * @param {number} [chunk] points to draw in all views together (default: the adapted chunk)
+   * @returns {boolean} whether points are left to draw
+   */
+  render(chunk = this.chunk) {
     const width = this.canvas.clientWidth / this.views.length;  // CSS pixels, as three.js
     const height = this.canvas.clientHeight;
-    const share = Math.floor(this.budget / this.views.length);
+    const restart = this.restart;
+    this.restart = false;
+    this.renderer.autoClear = false;
+    if (restart) {
+      this.renderer.setScissor(0, 0, this.canvas.clientWidth, height);
+      this.renderer.clear();
+      for (const view of this.views) view.drawn = 0;
+    }
+    const share = Math.max(1, Math.floor(chunk / this.views.length));
     let drawn = 0;
+    let left = false;
     this.views.forEach((view, k) => {
-      const count = moving ? Math.min(view.n, share) : view.n;
-      view.geometry.setDrawRange(0, count);
+      const count = Math.max(0, Math.min(share, view.n - view.drawn));
       view.material.uniforms.pointSize.value = this.pointSize * this.renderer.getPixelRatio();
-      drawn += count;
       this.renderer.setViewport(k * width, 0, width, height);
       this.renderer.setScissor(k * width, 0, width, height);
-      this.renderer.render(view.scene, this.camera);
+      if (count > 0) {
+        view.geometry.setDrawRange(view.drawn, count);
+        this.renderer.render(view.scene, this.camera);
+        view.drawn += count;
+        drawn += count;
+        // The marker goes over the finished picture (later chunks would cover it).
+        if (view.drawn >= view.n && view.marker.visible) {
+          this.renderer.render(view.overlay, this.camera);
+        }
+      }
+      if (view.drawn < view.n) left = true;
     });
-    this.lastDrawn = drawn;
-    this.lastFrameMs = performance.now() - start;
-    if (this.onrender) this.onrender({ drawn, moving });
+    this.lastChunk = drawn;
+    this.frames++;
+    if (this.onrender) {
+      this.onrender({ drawn: this.views.reduce((sum, v) => sum + v.drawn, 0), chunk: drawn });
+    }
+    return left;
   }
 
-  /** Milliseconds of `frames` frames (each waited for by reading a pixel back) while the
-   * camera turns around the cloud, drawing every point or (moving) the decimated set. */
-  measure(frames, moving) {
+  /** Milliseconds of `frames` frames while the camera turns around the cloud, each waited
+   * for (a pixel read back): each frame starts a new picture with `chunk` points. */
+  measure(frames, chunk) {
     const gl = this.renderer.getContext();
     const pixel = new Uint8Array(4);
     const times = [];
     for (let i = 0; i < frames; i++) {
       const start = performance.now();
       this.rotate(360 / frames, 0);
-      this.render(moving);
+      this.restart = true;
+      this.render(chunk);
       gl.readPixels(0, 0, 1, 1, gl.RGBA, gl.UNSIGNED_BYTE, pixel);
       times.push(performance.now() - start);
     }
+    this.requestRender();
     return times;
+  }
+
+  /** Turn the camera continuously for `seconds` as a user would (each animation frame a
+   * step), then stop; resolves to the frames per second while turning, the chunk it settled
+   * on and the seconds until the still picture held every point. */
+  spin(seconds, degreesPerFrame = 2) {
+    return new Promise((resolve) => {
+      const start = performance.now();
+      const first = this.frames;
+      const step = () => {
+        if (performance.now() - start < seconds * 1000) {
+          this.rotate(degreesPerFrame, 0);
+          this.requestRender();
+          requestAnimationFrame(step);
+          return;
+        }
+        const turning = (this.frames - first) / ((performance.now() - start) / 1000);
+        const chunk = this.chunk;
+        const stopped = performance.now();
+        const wait = () => {
+          if (this.frameRequested || this.views.some((v) => v.drawn < v.n)) {
+            requestAnimationFrame(wait);
+            return;
+          }
+          resolve({ fps: turning, chunk, complete_s: (performance.now() - stopped) / 1000 });
+        };
+        requestAnimationFrame(wait);
+      };
+      requestAnimationFrame(step);
+    });
   }
 
   /** Turn the camera around the target by azimuth and elevation (degrees). */
