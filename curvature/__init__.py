@@ -20,15 +20,18 @@ from .errors import (
     TooFewPointsError,
     UnknownFormatError,
 )
+from .field_info import FieldInfo
+from .field_info import describe as describe_field
 from .fitting import FIT_PARAMS
 from .io import read, write
 from .neighborhoods import FINDERS, Neighborhoods, neighbors
 from .params import ParamSpec
 from .pipeline import DEFAULT_FIT, DEFAULT_METHOD, FITS, METHODS, ORIENTATIONS, PRESETS, estimate
 from .preview import FIELDS as PREVIEW_FIELDS
+from .preview import UP_CHOICES as PREVIEW_UP_CHOICES
 from .preview import VIEWS as PREVIEW_VIEWS
-from .preview import render_preview
-from .result import CurvatureResult
+from .preview import auto_up, render_preview
+from .result import CurvatureResult, curvedness, shape_index
 from .status import Status
 
 __version__ = "0.1.0"
@@ -44,9 +47,11 @@ __all__ = [
     "ORIENTATIONS",
     "PRESETS",
     "PREVIEW_FIELDS",
+    "PREVIEW_UP_CHOICES",
     "PREVIEW_VIEWS",
     "CurvatureInputError",
     "CurvatureResult",
+    "FieldInfo",
     "FormatError",
     "NonFiniteError",
     "Neighborhoods",
@@ -56,10 +61,14 @@ __all__ = [
     "Status",
     "TooFewPointsError",
     "UnknownFormatError",
+    "auto_up",
+    "curvedness",
+    "describe_field",
     "estimate",
     "neighbors",
     "read",
     "render_preview",
+    "shape_index",
     "synthetic",
     "write",
 ]

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import CurvatureInputError, ParameterError
+from .field_info import describe
 from .io.atomic import atomic_open
 from .validation import as_points
 
@@ -27,17 +28,22 @@ FIELDS: dict[str, str] = {
     "k1": "principal curvature k1",
     "k2": "principal curvature k2",
 }
-# Colour-bar units: curvature is 1/length, Gaussian curvature (k1 * k2) 1/length^2.
-UNITS: dict[str, str] = {"mean": "1/length unit", "gaussian": "1/length unit^2",
-                         "k1": "1/length unit", "k2": "1/length unit"}
-
-# Camera presets for a z-up world: (direction from the cloud towards the camera, screen up).
+# Camera presets in the world frame (right, forward, up) of the chosen up axis: (direction
+# from the cloud towards the camera, screen up). With z up: right = x and forward = y.
 VIEWS: dict[str, tuple[tuple[float, float, float], tuple[float, float, float]]] = {
     "iso": ((1.0, -1.0, 1.0), (0.0, 0.0, 1.0)),
     "front": ((0.0, -1.0, 0.0), (0.0, 0.0, 1.0)),
     "side": ((1.0, 0.0, 0.0), (0.0, 0.0, 1.0)),
     "top": ((0.0, 0.0, 1.0), (0.0, 1.0, 0.0)),
 }
+AXES = {"x": (1.0, 0.0, 0.0), "y": (0.0, 1.0, 0.0), "z": (0.0, 0.0, 1.0)}
+UP_CHOICES = ("auto", "x", "-x", "y", "-y", "z", "-z")
+# Auto up (see auto_up): a cloud is flat when its smallest principal variance is below this
+# share of the largest; an object stands on a ground through the origin when its centroid is
+# off the origin by more than this many standard deviations along one axis.
+FLAT_RATIO = 0.05
+OFFSET_SPREADS = 1.0
+AUTO_SAMPLE = 100_000
 
 MAX_POINTS = 400_000
 PERCENTILES = (2.0, 98.0)
@@ -52,12 +58,114 @@ PLOT_BOX = (0.01, 0.06, 0.80, 0.85)
 COLORBAR_BOX = (0.84, 0.12, 0.035, 0.72)
 
 
-def camera(view: str) -> np.ndarray:
+def auto_up(points: np.ndarray) -> np.ndarray:
+    """The up direction of a cloud, chosen from its principal axes.
+
+    1. Flat clouds (smallest principal variance below :data:`FLAT_RATIO` of the largest: a
+       table-top scene, a floor, terrain) have up along their smallest principal axis, the
+       plane's normal, pointing to the side of the plane where the origin lies: in a scanner's
+       frame (PCL, OpenNI) the origin is the sensor, which sees the top of a table.
+    2. Other clouds (objects) stand on a ground through the origin when their centroid is
+       off the origin along one coordinate axis by more than :data:`OFFSET_SPREADS` standard
+       deviations of the cloud along that axis (the Stanford bunny, y up, sits at y > 0): up
+       is that axis, signed by the offset.
+    3. Otherwise z (the CAD and survey convention).
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+        Finite coordinates; at most :data:`AUTO_SAMPLE` of them (a fixed subsample) are used.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        Unit vector.
+    """
+    pts = np.asarray(points, dtype=np.float64)
+    keep = subsample(len(pts), AUTO_SAMPLE)
+    if keep is not None:
+        pts = pts[keep]
+    centroid = pts.mean(axis=0)
+    centred = pts - centroid
+    variances, axes = np.linalg.eigh(centred.T @ centred / max(len(pts), 1))
+    if variances[-1] > 0.0 and variances[0] < FLAT_RATIO * variances[-1]:
+        normal = axes[:, 0]
+        side = float(-centroid @ normal)  # where the origin lies, seen from the plane
+        return normal if side >= 0.0 else -normal
+    spread = np.sqrt(np.maximum(variances @ (axes * axes).T, 0.0))  # per-axis std
+    with np.errstate(divide="ignore", invalid="ignore"):
+        offsets = np.where(spread > 0.0, np.abs(centroid) / spread, 0.0)
+    best = int(np.argmax(offsets))
+    if offsets[best] > OFFSET_SPREADS:
+        up = np.zeros(3)
+        up[best] = np.sign(centroid[best])
+        return up
+    return np.array(AXES["z"])
+
+
+def up_vector(up, points: np.ndarray | None = None) -> np.ndarray:
+    """The up direction asked for: an axis name, ``"auto"`` or a vector.
+
+    Parameters
+    ----------
+    up : {"auto", "x", "-x", "y", "-y", "z", "-z"} or array_like, shape (3,)
+    points : ndarray, shape (n, 3), optional
+        Needed for ``"auto"`` (see :func:`auto_up`).
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        Unit vector.
+    """
+    if isinstance(up, str):
+        if up not in UP_CHOICES:
+            raise ParameterError(f"up must be one of {list(UP_CHOICES)} or a 3-vector, "
+                                 f"got {up!r}")
+        if up == "auto":
+            if points is None:
+                raise ParameterError("up='auto' needs the points")
+            return auto_up(points)
+        vector = np.array(AXES[up[-1]])
+        return -vector if up.startswith("-") else vector
+    vector = np.asarray(up, dtype=np.float64)
+    length = float(np.linalg.norm(vector)) if vector.shape == (3,) else 0.0
+    if not np.isfinite(length) or length == 0.0:
+        raise ParameterError(f"up must be a non-zero finite 3-vector, got {up!r}")
+    return vector / length
+
+
+def world_frame(up) -> np.ndarray:
+    """A right-handed frame around an up direction.
+
+    Right is the x axis made perpendicular to ``up`` (the y axis when up is close to x), and
+    forward = up x right: with z up this is (x, y, z), with y up (x, -z, y), with -y up, a
+    scanner's camera frame, (x, z, -y), so that ``front`` looks the way the scanner did.
+
+    Parameters
+    ----------
+    up : array_like, shape (3,)
+        Unit vector.
+
+    Returns
+    -------
+    ndarray, shape (3, 3)
+        Rows: right, forward, up.
+    """
+    u = np.asarray(up, dtype=np.float64)
+    seed = np.array(AXES["x"]) if abs(u[0]) < 0.9 else np.array(AXES["y"])
+    right = seed - (seed @ u) * u
+    right /= np.linalg.norm(right)
+    return np.stack([right, np.cross(u, right), u])
+
+
+def camera(view: str, up=AXES["z"]) -> np.ndarray:
     """Rotation of a camera preset.
 
     Parameters
     ----------
     view : {"iso", "front", "side", "top"}
+    up : array_like, shape (3,)
+        World up (unit vector); the presets are defined in :func:`world_frame` of it.
 
     Returns
     -------
@@ -66,11 +174,22 @@ def camera(view: str) -> np.ndarray:
     """
     if view not in VIEWS:
         raise ParameterError(f"view must be one of {sorted(VIEWS)}, got {view!r}")
-    eye, up = (np.asarray(v, dtype=np.float64) for v in VIEWS[view])
+    frame = world_frame(up)
+    eye, screen_up = (np.asarray(v, dtype=np.float64) @ frame for v in VIEWS[view])
     eye /= np.linalg.norm(eye)
-    right = np.cross(up, eye)
+    right = np.cross(screen_up, eye)
     right /= np.linalg.norm(right)
     return np.stack([right, np.cross(eye, right), eye])
+
+
+def up_label(up, vector: np.ndarray) -> str:
+    """How the title names the up direction: ``"-y"``, or ``"auto (0.01, -0.96, -0.28)"``."""
+    for name, axis in AXES.items():
+        for sign, prefix in ((1.0, ""), (-1.0, "-")):
+            if np.allclose(vector, sign * np.asarray(axis), atol=1e-9):
+                return f"{prefix}{name}" + (" (auto)" if up == "auto" else "")
+    text = "(" + ", ".join(f"{c:.2f}" for c in vector) + ")"
+    return f"auto {text}" if up == "auto" else text
 
 
 def color_limits(values: np.ndarray, field: str) -> tuple[float, float, bool]:
@@ -107,6 +226,34 @@ def color_limits(values: np.ndarray, field: str) -> tuple[float, float, bool]:
         pad = 0.05 * abs(lo) if lo != 0.0 else 1.0
         return lo - pad, hi + pad, False
     return lo, hi, False
+
+
+def tick_exponent(magnitude: float) -> int:
+    """Power of ten (a multiple of 3) that brings color-bar ticks of this size to 0.01-9999.
+
+    Parameters
+    ----------
+    magnitude : float
+        Largest absolute value on the bar.
+
+    Returns
+    -------
+    int
+        0 when the ticks read well as they are.
+    """
+    if not np.isfinite(magnitude) or magnitude <= 0.0 or 1e-2 <= magnitude < 1e4:
+        return 0
+    return int(3 * np.floor(np.log10(magnitude) / 3.0))
+
+
+def bar_label(field: str, exponent: int = 0) -> str:
+    """Color-bar label: the field's name and unit, with the ticks' power of ten, e.g.
+    ``"Gaussian curvature K [10^3 1/length unit²]"``."""
+    info = describe(field)
+    if exponent == 0:
+        return info.axis_label()
+    return f"{info.label} [10^{exponent} {info.unit}]" if info.unit else \
+        f"{info.label} [10^{exponent}]"
 
 
 def subsample(n: int, max_points: int, seed: int = 0) -> np.ndarray | None:
@@ -213,12 +360,13 @@ def _import_matplotlib():
         from matplotlib.cm import ScalarMappable
         from matplotlib.colors import Normalize
         from matplotlib.figure import Figure
+        from matplotlib.ticker import FuncFormatter
     except ImportError as exc:
         raise ImportError(MISSING_MATPLOTLIB) from exc
-    return colormaps, FigureCanvasAgg, ScalarMappable, Normalize, Figure
+    return colormaps, FigureCanvasAgg, ScalarMappable, Normalize, Figure, FuncFormatter
 
 
-def render_preview(result, field: str = "mean", *, view: str = "iso", path=None,
+def render_preview(result, field: str = "mean", *, view: str = "iso", up="auto", path=None,
                    width: int = 800, height: int = 600, max_points: int = MAX_POINTS,
                    seed: int = 0, title: str | None = None) -> bytes | Path:
     """Render a PNG of a cloud colored by a curvature field, with a color bar.
@@ -236,7 +384,11 @@ def render_preview(result, field: str = "mean", *, view: str = "iso", path=None,
     field : {"mean", "gaussian", "k1", "k2"}
         The field that gives the colors.
     view : {"iso", "front", "side", "top"}
-        Camera preset (z up; ``top`` looks down the z axis), orthographic projection.
+        Camera preset relative to ``up`` (``top`` looks down it), orthographic projection.
+    up : {"auto", "x", "-x", "y", "-y", "z", "-z"} or array_like, shape (3,)
+        The world's up direction; ``"auto"`` chooses it from the cloud's principal axes
+        (:func:`auto_up`): y for the Stanford bunny, about -y for a PCL scanner scene, z for
+        a cloud centred on the origin.
     path : str or os.PathLike, optional
         Write the PNG there (atomically) instead of returning its bytes.
     width, height : int
@@ -247,7 +399,7 @@ def render_preview(result, field: str = "mean", *, view: str = "iso", path=None,
     seed : int
         Seed of the subsample.
     title : str, optional
-        Defaults to the field's name and the view.
+        Defaults to the field's name, the view and the up direction.
 
     Returns
     -------
@@ -257,7 +409,7 @@ def render_preview(result, field: str = "mean", *, view: str = "iso", path=None,
     Raises
     ------
     ParameterError
-        Unknown field or view, or a picture size or ``max_points`` out of range.
+        Unknown field, view or up, or a picture size or ``max_points`` out of range.
     CurvatureInputError
         Missing arrays, wrong shapes or non-finite coordinates.
     ImportError
@@ -267,8 +419,10 @@ def render_preview(result, field: str = "mean", *, view: str = "iso", path=None,
         raise ParameterError(f"the picture must be at least 200 x 150 pixels, got "
                              f"{width} x {height}")
     points, values = _field_values(result, field)
-    rotation = camera(view)
-    colormaps, FigureCanvasAgg, ScalarMappable, Normalize, Figure = _import_matplotlib()
+    up_dir = up_vector(up, points)
+    rotation = camera(view, up_dir)
+    (colormaps, FigureCanvasAgg, ScalarMappable, Normalize, Figure,
+     FuncFormatter) = _import_matplotlib()
 
     vmin, vmax, diverging = color_limits(values, field)
     norm = Normalize(vmin=vmin, vmax=vmax)
@@ -295,9 +449,14 @@ def render_preview(result, field: str = "mean", *, view: str = "iso", path=None,
               (True, True): "both"}[below, above]
     bar = fig.colorbar(ScalarMappable(norm=norm, cmap=cmap), cax=fig.add_axes(COLORBAR_BOX),
                        extend=extend)
-    bar.set_label(f"{FIELDS[field]} [{UNITS[field]}]")
-    fig.suptitle(title if title is not None else f"{FIELDS[field]} ({view} view)",
-                 fontsize=12)
+    # The power of ten goes into the label, beside the unit: matplotlib would otherwise print
+    # an offset or a x10^k multiplier above the bar, apart from the unit it changes.
+    exponent = tick_exponent(max(abs(vmin), abs(vmax)))
+    bar.formatter = FuncFormatter(lambda v, _pos: f"{v / 10.0 ** exponent:g}")
+    bar.update_ticks()
+    bar.set_label(bar_label(field, exponent))
+    fig.suptitle(title if title is not None else
+                 f"{FIELDS[field]} ({view} view, up {up_label(up, up_dir)})", fontsize=12)
     nan_count = int(values.size - finite.size)
     note = f"{len(points):,} points"
     if keep is not None:

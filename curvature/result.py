@@ -13,6 +13,38 @@ VECTOR_FIELDS = ("normals", "dir1", "dir2")
 INT_FIELDS = ("neighbor_count", "status")
 
 
+def shape_index(k1: np.ndarray, k2: np.ndarray) -> np.ndarray:
+    """Koenderink's shape index S in [-1, 1], dimensionless.
+
+    S = (2 / pi) arctan((k1 + k2) / (k1 - k2)): +1 a convex cap, 0.5 a ridge, 0 a
+    symmetric saddle, -0.5 a valley (rut), -1 a cup, with this package's sign (positive
+    where the surface bends away from the oriented normal). Umbilics (k1 = k2) get +-1 by
+    the sign of H; flat points (k1 = k2 = 0) have no shape and are NaN.
+
+    Parameters
+    ----------
+    k1, k2 : ndarray, shape (n,)
+        Principal curvatures, k1 >= k2 (NaN allowed).
+
+    Returns
+    -------
+    ndarray, shape (n,), float64
+    """
+    k1 = np.asarray(k1, dtype=np.float64)
+    k2 = np.asarray(k2, dtype=np.float64)
+    with np.errstate(all="ignore"):
+        s = (2.0 / np.pi) * np.arctan2(k1 + k2, k1 - k2)
+    s[(k1 == 0) & (k2 == 0)] = np.nan
+    return s
+
+
+def curvedness(k1: np.ndarray, k2: np.ndarray) -> np.ndarray:
+    """Koenderink's curvedness C = sqrt((k1^2 + k2^2) / 2), shape (n,), 1/length unit."""
+    k1 = np.asarray(k1, dtype=np.float64)
+    k2 = np.asarray(k2, dtype=np.float64)
+    return np.sqrt(0.5 * (k1 * k1 + k2 * k2))
+
+
 @dataclass
 class CurvatureResult:
     """Curvature of every input point, in input order (DESIGN.md section 5).
@@ -78,22 +110,13 @@ class CurvatureResult:
 
     @property
     def shape_index(self) -> np.ndarray:
-        """Koenderink's shape index S in [-1, 1], shape (n,), dimensionless.
-
-        S = (2 / pi) arctan((k1 + k2) / (k1 - k2)): +1 a convex cap, 0.5 a ridge, 0 a
-        symmetric saddle, -0.5 a valley (rut), -1 a cup, with this package's sign (positive
-        where the surface bends away from the oriented normal). Umbilics (k1 = k2) get +-1 by
-        the sign of H; flat points (k1 = k2 = 0) have no shape and are NaN.
-        """
-        with np.errstate(all="ignore"):
-            s = (2.0 / np.pi) * np.arctan2(self.k1 + self.k2, self.k1 - self.k2)
-        s[(self.k1 == 0) & (self.k2 == 0)] = np.nan
-        return s
+        """Koenderink's shape index, shape (n,): see :func:`shape_index`."""
+        return shape_index(self.k1, self.k2)
 
     @property
     def curvedness(self) -> np.ndarray:
-        """Koenderink's curvedness C = sqrt((k1^2 + k2^2) / 2), shape (n,), 1/length unit."""
-        return np.sqrt(0.5 * (self.k1 * self.k1 + self.k2 * self.k2))
+        """Koenderink's curvedness, shape (n,), 1/length unit: see :func:`curvedness`."""
+        return curvedness(self.k1, self.k2)
 
     def derived_fields(self) -> dict[str, np.ndarray]:
         """Fields computed from k1 and k2 on demand: shape index and curvedness, (n,)."""

@@ -17,6 +17,7 @@ from curvature.cli import add_method_options, chosen_method_params
 from .client import (
     DEFAULT_URL,
     PREVIEW_FIELDS,
+    PREVIEW_UP_CHOICES,
     PREVIEW_VIEWS,
     RESULT_FORMATS,
     CurvatureClient,
@@ -99,6 +100,8 @@ def register(subparsers) -> None:
     preview.add_argument("-o", "--output", required=True, help="PNG file")
     preview.add_argument("--field", default="mean", choices=PREVIEW_FIELDS)
     preview.add_argument("--view", default="iso", choices=PREVIEW_VIEWS)
+    preview.add_argument("--up", default="auto", choices=PREVIEW_UP_CHOICES,
+                         help="the world's up axis (auto: from the cloud's principal axes)")
     preview.set_defaults(handler=run, remote_handler=cmd_preview)
 
     cancel = commands.add_parser("cancel", parents=[common],
@@ -199,7 +202,7 @@ def cmd_result(args) -> int:
 
 def cmd_preview(args) -> int:
     with _client(args) as client:
-        client.preview(args.job, args.field, view=args.view, path=args.output)
+        client.preview(args.job, args.field, view=args.view, up=args.up, path=args.output)
     return 0
 
 

@@ -29,6 +29,7 @@ DEFAULT_URL = "http://127.0.0.1:8000"
 RESULT_FORMATS = ("json", "ply", "csv", "npz")
 PREVIEW_FIELDS = ("mean", "gaussian", "k1", "k2")
 PREVIEW_VIEWS = ("iso", "front", "side", "top")
+PREVIEW_UP_CHOICES = ("auto", "x", "-x", "y", "-y", "z", "-z")
 # While waiting, a service that is briefly unreachable or not ready (restart) is retried for
 # this long before the error is raised.
 TRANSIENT_WINDOW = 30.0
@@ -366,17 +367,39 @@ class CurvatureClient:
             return response.json()
         return response.content
 
-    def preview(self, job, field: str = "mean", *, view: str = "iso", path=None):
-        """PNG picture of a finished job's cloud colored by ``field`` (bytes, or a file)."""
+    def preview(self, job, field: str = "mean", *, view: str = "iso", up: str = "auto",
+                path=None):
+        """PNG picture of a finished job's cloud colored by ``field`` (bytes, or a file);
+        ``up`` is the world's up axis (``auto``: chosen from the cloud's principal axes)."""
         if field not in PREVIEW_FIELDS:
             raise ValueError(f"field must be one of {', '.join(PREVIEW_FIELDS)}, got {field!r}")
         if view not in PREVIEW_VIEWS:
             raise ValueError(f"view must be one of {', '.join(PREVIEW_VIEWS)}, got {view!r}")
+        if up not in PREVIEW_UP_CHOICES:
+            raise ValueError(f"up must be one of {', '.join(PREVIEW_UP_CHOICES)}, got {up!r}")
         url = f"/v1/jobs/{job_id_of(job)}/preview.png"
-        query = {"field": field, "view": view}
+        query = {"field": field, "view": view, "up": up}
         if path is not None:
             return self._download(url, path, params=query)
         return self._request("GET", url, params=query).content
+
+    def fields(self, job) -> dict:
+        """The per-point fields of a finished job's result: ``n``, ``up`` and ``fields``
+        (name, components, label, unit, scale of each)."""
+        return self._request("GET", f"/v1/jobs/{job_id_of(job)}/result/fields").json()
+
+    def field(self, job, name: str) -> np.ndarray:
+        """One field of a finished job's result as float32, shape (n,) or (n, components):
+        4 bytes a value, for when the whole result is not needed."""
+        response = self._request("GET", f"/v1/jobs/{job_id_of(job)}/result/fields/{name}")
+        values = np.frombuffer(response.content, dtype="<f4")
+        width = int(response.headers.get("x-components", "1"))
+        return values.reshape(-1, width) if width > 1 else values
+
+    def point(self, job, index: int) -> dict:
+        """Every field of one point of a finished job's result, as stored (``None``: NaN)."""
+        return self._request("GET", f"/v1/jobs/{job_id_of(job)}/result/points/{int(index)}"
+                             ).json()["fields"]
 
     def cancel(self, job) -> Job | None:
         """Cancel a queued or running job (returns it, now ``cancelled``); a job that has

@@ -21,7 +21,7 @@ from .metrics import RequestMetricsMiddleware, ServiceMetrics
 from .middleware import HygieneMiddleware, install_log_redaction
 from .problem_types import PROBLEM_TYPES, ProblemError
 from .problems import PROBLEM_MEDIA_TYPE
-from .routes import api_docs, health, jobs, methods, preview, ui
+from .routes import api_docs, fields, health, jobs, methods, preview, ui
 from .routes import curvature as curvature_routes
 from .routes import problems as problem_routes
 from .schemas import CloudRequest, MultipartCloudRequest, Problem
@@ -162,7 +162,7 @@ def create_app(settings: Settings | None = None) -> FastAPI:
     install_log_redaction()
     # Added last = outermost: it also counts the 500s the catch-all produces.
     app.add_middleware(RequestMetricsMiddleware, metrics=app.state.metrics)
-    for module in (jobs, preview, curvature_routes, methods, health, problem_routes, ui,
+    for module in (jobs, fields, preview, curvature_routes, methods, health, problem_routes, ui,
                    api_docs):
         app.include_router(module.router)
     app.openapi = lambda: build_openapi(app)

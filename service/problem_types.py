@@ -59,6 +59,11 @@ _TYPES = [
                 "(CURVATURE_SYNC_MAX_COST); use cheaper parameters or submit it as a job."),
     ProblemType("job-not-found", 404, "Job not found",
                 "No job has this id (it never existed, was deleted or has expired)."),
+    ProblemType("field-not-found", 404, "Field not found",
+                "The job's result has no field of this name; GET /v1/jobs/{id}/result/fields "
+                "lists them."),
+    ProblemType("point-not-found", 404, "Point not found",
+                "The point index is outside the result (0 to n - 1)."),
     ProblemType("result-not-ready", 409, "Result not ready",
                 "The job is still queued or running; poll the job and retry."),
     ProblemType("job-failed", 409, "Job failed",

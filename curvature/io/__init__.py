@@ -27,7 +27,8 @@ from ..errors import FormatError, UnknownFormatError
 from ..result import CurvatureResult
 from .arrays import read_npy, read_npz, write_npz
 from .atomic import atomic_open
-from .columns import result_from_cloud, table_of
+from .colors import expand_colors
+from .columns import DERIVED, RESULT_ORDER, result_from_cloud, table_of
 from .e57 import read_e57
 from .json_format import write_json
 from .las import read_las, write_las
@@ -64,9 +65,12 @@ MEDIA_TYPES = {
 }
 
 __all__ = [
+    "DERIVED",
     "FORMATS_READ",
     "FORMATS_WRITE",
     "MEDIA_TYPES",
+    "RESULT_ORDER",
+    "expand_colors",
     "format_from_path",
     "read",
     "read_bytes",

@@ -24,16 +24,18 @@ router = APIRouter(prefix="/v1/jobs", tags=["jobs"])
 
 PreviewField = Literal[tuple(curvature.PREVIEW_FIELDS)]
 PreviewView = Literal[tuple(curvature.PREVIEW_VIEWS)]
+PreviewUp = Literal[tuple(curvature.PREVIEW_UP_CHOICES)]
 # Renders at once per process: each holds a result's points in memory and a CPU core.
 MAX_CONCURRENT_RENDERS = 2
 
 
-def preview_path(job_dir: Path, field: str, view: str) -> Path:
-    """Where the PNG of ``field`` seen from ``view`` is cached in the job's folder."""
-    return job_dir / f"preview-{field}-{view}.png"
+def preview_path(job_dir: Path, field: str, view: str, up: str = "auto") -> Path:
+    """Where the PNG of ``field`` seen from ``view`` with ``up`` is cached in the job's
+    folder."""
+    return job_dir / f"preview-{field}-{view}-up{up}.png"
 
 
-def render_cached(job_dir: Path, field: str, view: str,
+def render_cached(job_dir: Path, field: str, view: str, up: str = "auto",
                   canonical_sha256: str | None = None) -> Path:
     """The cached PNG, rendered from the canonical result on first request.
 
@@ -47,14 +49,14 @@ def render_cached(job_dir: Path, field: str, view: str,
     ResultCorrupt
         The canonical result fails its checksum ``canonical_sha256``.
     """
-    target = preview_path(job_dir, field, view)
+    target = preview_path(job_dir, field, view, up)
     if not target.exists():
         if (job_dir / CANONICAL_RESULT).exists() and not matches(job_dir / CANONICAL_RESULT,
                                                                  canonical_sha256):
             raise ResultCorrupt(f"{CANONICAL_RESULT} fails its checksum")
         with np.load(job_dir / CANONICAL_RESULT, allow_pickle=False) as archive:
             arrays = {"points": archive["points"], field: archive[field]}
-        curvature.render_preview(arrays, field, view=view, path=target)  # atomic rename
+        curvature.render_preview(arrays, field, view=view, up=up, path=target)  # atomic
     return target
 
 
@@ -83,8 +85,12 @@ async def get_preview(
     store: Annotated[JobStore, Depends(get_store)],
     field: Annotated[PreviewField, Query(description="Field that gives the colors.")] = "mean",
     view: Annotated[PreviewView, Query(
-        description="Camera preset, z up: iso (from +x, -y, +z), front (from -y), side "
-                    "(from +x) or top (from +z).")] = "iso",
+        description="Camera preset around the up axis; with z up: iso (from +x, -y, +z), "
+                    "front (from -y), side (from +x) or top (from +z).")] = "iso",
+    up: Annotated[PreviewUp, Query(
+        description="The world's up axis; auto chooses it from the cloud's principal axes "
+                    "(a flat scene's normal, towards the origin's side; else the axis along "
+                    "which the cloud sits off the origin; else z).")] = "auto",
 ) -> FileResponse:
     """The cloud of a succeeded job, orthographic from a camera preset, colored by ``field``
     between its 2nd and 98th percentile (symmetric around 0 with a diverging map for mean and
@@ -93,7 +99,7 @@ async def get_preview(
     job = await succeeded_job(store, job_id, owner)
     try:
         path = await anyio.to_thread.run_sync(render_cached, settings.jobs_dir / job_id, field,
-                                              view, job.result_sha256,
+                                              view, up, job.result_sha256,
                                               limiter=_limiter(request))
     except FileNotFoundError as exc:  # deleted or expired while we looked, or lost
         raise await recompute(store, request.app.state.executor, settings, job,
@@ -102,5 +108,5 @@ async def get_preview(
         raise await recompute(store, request.app.state.executor, settings, job,
                               str(exc)) from None
     return FileResponse(path, media_type="image/png", headers={
-        "Content-Disposition": f'inline; filename="{job_id}-{field}-{view}.png"',
+        "Content-Disposition": f'inline; filename="{job_id}-{field}-{view}-up{up}.png"',
         "Cache-Control": "private, max-age=86400"})

@@ -1,6 +1,8 @@
-"""A small web page for people: the caller's jobs with status, progress and previews, and a
-form to upload a file. Plain HTML, CSS and JavaScript from ``service/static`` (no build step);
-the page talks to the same JSON API as every other client. Left out of the OpenAPI document.
+"""A small web page for people: the caller's jobs with status, progress and previews, a form
+to upload a file, and a WebGL viewer of finished jobs. HTML, CSS and JavaScript from
+``service/static``: ``app.js`` is written by hand, ``viewer.js`` is the three.js bundle built
+from ``web/`` (committed, so nothing is fetched from elsewhere). The page talks to the same
+JSON API as every other client. Left out of the OpenAPI document.
 """
 
 from __future__ import annotations
@@ -16,7 +18,7 @@ router = APIRouter(include_in_schema=False)
 
 STATIC_DIR = Path(__file__).resolve().parent.parent / "static"
 # Only these files are served: no path from the request ever reaches the file system.
-ASSETS = {"app.js": "text/javascript", "style.css": "text/css"}
+ASSETS = {"app.js": "text/javascript", "viewer.js": "text/javascript", "style.css": "text/css"}
 SECURITY_HEADERS = {
     # Scripts and styles from this origin only; previews arrive as blob: URLs.
     "Content-Security-Policy": "default-src 'self'; img-src 'self' blob: data:; "

@@ -1,5 +1,6 @@
 // The jobs page: lists the caller's jobs (GET /v1/jobs) with status, progress and preview
-// thumbnails, and submits files (POST /v1/jobs). Every request carries the API key from
+// thumbnails, submits files (POST /v1/jobs) and follows the submitted job until the viewer
+// (viewer.js, the bundle built from web/) opens it. Every request carries the API key from
 // localStorage as a Bearer token, so previews and downloads are fetched as blobs (an <img src>
 // or <a href> could not send the header).
 "use strict";
@@ -8,10 +9,13 @@ const KEY_STORAGE = "curvature.apiKey";
 const REFRESH_BUSY_MS = 2000;   // while a job is queued or running
 const REFRESH_IDLE_MS = 10000;
 const PAGE_SIZE = 50;
+const FOLLOW_MS = 1000;         // polling of the job submitted from this page
 
 const $ = (id) => document.getElementById(id);
 const thumbnails = new Map();   // "id|field|view" -> Promise of an object URL (or null)
 let refreshTimer = null;
+let followTimer = null;
+let viewer = null;              // the ViewerPanel, when the bundle loaded
 
 class ApiError extends Error {
   constructor(status, problem) {
@@ -117,12 +121,41 @@ async function submitJob(event) {
     showMessage(`Job ${job.id} submitted (${file.name}, ${params.method}).`, "ok");
     $("submit-form").reset();
     describeMethod();
+    follow(job);
     await refresh();
   } catch (err) {
     showMessage("Not submitted: " + explain(err), "error");
   } finally {
     $("submit-button").disabled = false;
   }
+}
+
+// -- the job submitted from this page: progress, then the viewer -----------------------------
+
+function showProgress(job) {
+  $("job-progress").hidden = false;
+  $("job-progress").dataset.status = job.status;
+  $("job-progress-bar").value = job.progress;
+  const percent = Math.round(job.progress * 100);
+  const detail = job.error ? `: ${job.error.detail || job.error.title}` : "";
+  $("job-progress-text").textContent = `Job ${job.id}: ${job.status}, ${percent} %${detail}`;
+}
+
+function follow(job) {
+  clearTimeout(followTimer);
+  showProgress(job);
+  if (job.status === "succeeded") {
+    if (viewer) viewer.open(job);
+    return;
+  }
+  if (["failed", "cancelled"].includes(job.status)) return;
+  followTimer = setTimeout(async () => {
+    try {
+      follow(await (await api(`/v1/jobs/${encodeURIComponent(job.id)}`)).json());
+    } catch (err) {
+      showMessage("Lost track of the job: " + explain(err), "error");
+    }
+  }, FOLLOW_MS);
 }
 
 // -- the jobs table ------------------------------------------------------------------------
@@ -198,6 +231,11 @@ function actionsCell(job) {
     const button = element("button", { type: "button" }, "Download");
     button.addEventListener("click", () => download(job, select.value));
     cell.append(select, " ", button, " ");
+    if (viewer) {
+      const view = element("button", { type: "button", class: "view" }, "View");
+      view.addEventListener("click", () => viewer.open(job));
+      cell.append(view, " ");
+    }
   }
   const final = ["succeeded", "failed", "cancelled"].includes(job.status);
   const remove = element("button", { type: "button" }, final ? "Delete" : "Cancel");
@@ -244,6 +282,7 @@ async function refresh() {
   try {
     const page = await (await api(`/v1/jobs?limit=${PAGE_SIZE}`)).json();
     renderJobs(page.items);
+    if (viewer) viewer.setJobs(page.items);
     busy = page.items.some((job) => job.status === "queued" || job.status === "running");
     $("updated").textContent = "updated " + new Date().toLocaleTimeString();
   } catch (err) {
@@ -281,6 +320,10 @@ async function start() {
 }
 
 document.addEventListener("DOMContentLoaded", () => {
+  if (window.CurvatureViewer) {
+    viewer = new window.CurvatureViewer.ViewerPanel({ api, explain, message: showMessage });
+    window.curvatureViewer = viewer;  // for the browser tests and benchmarks/viewer_fps.py
+  }
   $("api-key").value = apiKey();
   $("key-form").addEventListener("submit", saveKey);
   $("forget-key").addEventListener("click", forgetKey);

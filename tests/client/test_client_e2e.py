@@ -93,6 +93,27 @@ def test_preview_through_the_client(server, cloud, tmp_path):
         path = client.preview(job, "gaussian", view="top", path=tmp_path / "p.png")
     assert Image.open(io.BytesIO(png)).size == (800, 600)
     assert path.read_bytes() == png  # the cached picture
+    with CurvatureClient(server.url) as client:
+        assert client.preview(job, "gaussian", view="top", up="x") != png
+        with pytest.raises(ValueError, match="up must be one of"):
+            client.preview(job, up="w")
+
+
+def test_fields_one_at_a_time_through_the_client(server, cloud, local):
+    with CurvatureClient(server.url) as client:
+        job = client.wait(client.submit(cloud, "knn", **PARAMS), progress=False)
+        listing = client.fields(job)
+        k1 = client.field(job, "k1")
+        normals = client.field(job, "normals")
+        point = client.point(job, 3)
+        with pytest.raises(CurvatureAPIError) as caught:
+            client.field(job, "nothing")
+    assert listing["n"] == len(cloud) and listing["fields"][0]["name"] == "points"
+    assert k1.dtype == np.float32 and np.array_equal(k1, local.k1.astype(np.float32),
+                                                     equal_nan=True)
+    assert normals.shape == (len(cloud), 3)
+    assert point["k1"] == local.k1[3] and point["normals"] == local.normals[3].tolist()
+    assert caught.value.status == 404 and caught.value.type == "/problems/field-not-found"
 
 
 def test_cancel_a_running_job(server):

@@ -187,3 +187,100 @@ def test_cli_preview_options_are_checked(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["estimate", "x.ply", "-o", "y.ply", "--preview", "p.png", "--preview-field", "H"])
     assert "invalid choice" in capsys.readouterr().err
+
+
+# -- the up axis -------------------------------------------------------------------------------
+
+def test_z_up_cameras_are_the_presets_and_every_up_gives_a_right_handed_frame():
+    from curvature.preview import UP_CHOICES, up_vector, world_frame
+
+    for view in ("iso", "front", "side", "top"):
+        assert np.allclose(camera(view, (0.0, 0.0, 1.0)), camera(view))
+    for up in UP_CHOICES[1:]:
+        u = up_vector(up)
+        frame = world_frame(u)
+        assert np.allclose(frame @ frame.T, np.eye(3)) and np.isclose(np.linalg.det(frame), 1)
+        assert np.allclose(frame[2], u)
+        for view in ("iso", "front", "side", "top"):
+            rot = camera(view, u)
+            assert np.allclose(rot @ rot.T, np.eye(3))
+            if view != "top":
+                assert rot[1] @ u > 0  # the world's up is up on the screen
+        assert np.allclose(camera("top", u)[2], u)  # top looks down the up axis
+    # y up (OpenGL, Stanford bunny): front looks from +z; -y up (a scanner's camera frame,
+    # x right, y down, z forward): front looks from behind the scanner, along +z.
+    assert np.allclose(camera("front", up_vector("y"))[2], [0, 0, 1])
+    assert np.allclose(camera("front", up_vector("-y")), [[1, 0, 0], [0, -1, 0], [0, 0, -1]])
+
+
+def test_auto_up_of_flat_and_standing_clouds():
+    from curvature.preview import auto_up
+
+    rng = np.random.default_rng(4)
+    # A table top 1 below a scanner at the origin, tilted: up is its normal, towards the
+    # scanner (the origin), whichever way the normal's sign came out of the eigensolver.
+    normal = np.array([0.0, -0.96, -0.28])
+    a = np.cross(normal, [1.0, 0.0, 0.0])
+    b = np.cross(normal, a)
+    table = rng.uniform(-1, 1, (5000, 1)) * a + rng.uniform(-1, 1, (5000, 1)) * b
+    for offset in (-normal, normal):
+        up = auto_up(table + offset * 1.5)
+        assert np.allclose(up, normal if offset @ normal < 0 else -normal, atol=1e-3)
+    # An object standing on the ground at y = 0 (y up), and the same at z = 0.
+    blob = rng.normal(size=(3000, 3)) * [0.3, 0.2, 0.25]
+    assert np.allclose(auto_up(blob + [0.0, 1.0, 0.0]), [0, 1, 0])
+    assert np.allclose(auto_up(blob + [0.0, 0.0, -1.0]), [0, 0, -1])
+    assert np.allclose(auto_up(blob), [0, 0, 1])  # centred: z
+
+
+def test_auto_up_of_the_real_scans(shared_data):
+    from curvature.preview import auto_up
+
+    bunny = curvature.read(shared_data / "bun_zipper.ply").points
+    assert np.allclose(auto_up(bunny), [0, 1, 0])  # the bunny stands on y = 0.033
+    assert np.allclose(auto_up(curvature.read(shared_data / "bun000.ply").points), [0, 1, 0])
+    for name in ("table_scene_mug_stereo_textured.pcd", "milk_cartoon_all_small_clorox.pcd"):
+        points = curvature.read(shared_data / name).points
+        up = auto_up(points[np.isfinite(points).all(axis=1)])
+        assert up @ [0, -1, 0] > 0.8, (name, up)  # the table's normal, towards the sensor
+
+
+def test_up_changes_the_picture_and_its_title(torus_result):
+    pictures = {up: box_pixels(decode(render_preview(torus_result, "mean", up=up)), PLOT_BOX)
+                for up in ("auto", "z", "x")}
+    assert np.array_equal(pictures["auto"], pictures["z"])  # a centred torus: z
+    assert not np.array_equal(pictures["x"], pictures["z"])
+    vector = render_preview(torus_result, "mean", up=(2.0, 0.0, 0.0))
+    assert np.array_equal(box_pixels(decode(vector), PLOT_BOX), pictures["x"])
+
+
+@pytest.mark.parametrize("up, message", [("w", "up must be one of"), ("--x", "up must be"),
+                                         ((0.0, 0.0, 0.0), "non-zero"),
+                                         ((1.0, np.nan, 0.0), "non-zero finite")])
+def test_bad_up_is_a_parameter_error(torus_result, up, message):
+    with pytest.raises(curvature.ParameterError, match=message):
+        render_preview(torus_result, up=up)
+
+
+def test_color_bar_label_carries_the_unit_and_the_ticks_power_of_ten():
+    from curvature.preview import bar_label, tick_exponent
+
+    assert bar_label("mean") == "mean curvature H [1/length unit]"
+    assert bar_label("gaussian") == "Gaussian curvature K [1/length unit²]"
+    assert bar_label("gaussian", 3) == "Gaussian curvature K [10^3 1/length unit²]"
+    assert [tick_exponent(m) for m in (0.5, 0.01, 9999.0, 12000.0, 0.004, 2e-7, 0.0)] == \
+        [0, 0, 0, 3, -3, -9, 0]
+    assert curvature.describe_field("k1_std").unit == "1/length unit"
+    assert curvature.describe_field("k1_std").scale == "sequential"
+    assert curvature.describe_field("intensity").scale == "auto"
+
+
+def test_large_curvature_ticks_are_scaled_not_offset():
+    # K of a 0.5 mm sphere in metres is 4e6: ticks read about 4 with 10^6 in the label.
+    sphere = synthetic.sphere(2000, radius=5e-4, seed=1)
+    res = curvature.estimate(sphere.points, "knn", fit="monge", k=16)
+    png = render_preview(res, "gaussian")
+    assert decode(png).shape == (600, 800, 3)
+    from curvature.preview import color_limits, tick_exponent
+    vmin, vmax, _ = color_limits(res.gaussian, "gaussian")
+    assert tick_exponent(max(abs(vmin), abs(vmax))) == 6

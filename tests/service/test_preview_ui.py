@@ -4,19 +4,12 @@ driven end to end in headless Chromium over the DevTools protocol."""
 from __future__ import annotations
 
 import base64
-import contextlib
 import io
 import json
-import os
-import shutil
-import signal
-import subprocess
-import time
-from pathlib import Path
 
-import httpx
 import numpy as np
 import pytest
+from browser import chromium, needs_chromium
 from PIL import Image
 from service_helpers import KEY_A, KEY_B, KEYS, ServerProcess, bearer, sphere, wait_for_job
 
@@ -62,7 +55,7 @@ def test_preview_is_rendered_once_and_cached_with_the_job(client, done_job, monk
     assert response.status_code == 200, response.text
     assert response.headers["content-type"] == "image/png"
     assert png_size(response.content) == (800, 600)
-    cached = client.app.state.settings.jobs_dir / done_job / "preview-mean-iso.png"
+    cached = client.app.state.settings.jobs_dir / done_job / "preview-mean-iso-upauto.png"
     assert cached.read_bytes() == response.content
 
     def no_render(*args, **kwargs):
@@ -168,93 +161,6 @@ def test_page_and_assets_are_served_with_a_strict_policy(client):
 
 
 # -- the page in a real browser ------------------------------------------------------------
-
-CHROMIUM = next((path for path in (shutil.which("chromium"), "/usr/bin/chromium")
-                 if path and os.path.exists(path)), None)
-needs_chromium = pytest.mark.skipif(
-    CHROMIUM is None, reason="chromium is not installed (Debian: apt-get install chromium; "
-                             ".ci/run installs it); the browser test needs it")
-
-
-class DevTools:
-    """A minimal Chrome DevTools Protocol session over one page's websocket."""
-
-    def __init__(self, ws):
-        self.ws = ws
-        self.next_id = 0
-
-    def call(self, method: str, **params) -> dict:
-        self.next_id += 1
-        self.ws.send(json.dumps({"id": self.next_id, "method": method, "params": params}))
-        while True:
-            message = json.loads(self.ws.recv(timeout=60))
-            if message.get("id") == self.next_id:  # anything else is an event: ignored
-                if "error" in message:
-                    raise RuntimeError(f"{method}: {message['error']}")
-                return message.get("result", {})
-
-    def evaluate(self, expression: str):
-        result = self.call("Runtime.evaluate", expression=expression, returnByValue=True,
-                           awaitPromise=True)
-        if "exceptionDetails" in result:
-            raise RuntimeError(f"{expression}: {result['exceptionDetails']}")
-        return result["result"].get("value")
-
-    def wait_for(self, expression: str, timeout: float = 90.0):
-        """Evaluate until the value is truthy; errors count as not yet (the page may still
-        be loading)."""
-        deadline = time.monotonic() + timeout
-        while True:
-            try:
-                value, problem = self.evaluate(expression), None
-            except RuntimeError as exc:
-                value, problem = None, exc
-            if value:
-                return value
-            if time.monotonic() > deadline:
-                page = self.evaluate("document.body ? document.body.innerText : ''")
-                pytest.fail(f"timed out waiting for {expression} ({problem}); the page "
-                            f"shows:\n{page}")
-            time.sleep(0.2)
-
-
-@contextlib.contextmanager
-def chromium(profile: Path, flags: tuple[str, ...] = ()):
-    """Headless Chromium with remote debugging (and ``flags``); yields a DevTools session on
-    its page."""
-    from websockets.sync.client import connect
-
-    process = subprocess.Popen(
-        [CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
-         "--no-first-run", "--disable-background-networking", "--disable-component-update",
-         "--disable-sync", "--disable-dev-shm-usage", "--hide-scrollbars", "--lang=en-US",
-         "--remote-debugging-address=127.0.0.1", "--remote-debugging-port=0",
-         f"--user-data-dir={profile}", "--window-size=1200,800", *flags, "about:blank"],
-        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
-    try:
-        port_file = profile / "DevToolsActivePort"
-        deadline = time.monotonic() + 60
-        while not (port_file.exists() and len(port_file.read_text().split()) >= 2):
-            if process.poll() is not None or time.monotonic() > deadline:
-                pytest.fail(f"chromium did not open its debugging port (exit {process.poll()})")
-            time.sleep(0.1)
-        port = int(port_file.read_text().split()[0])
-        targets = httpx.get(f"http://127.0.0.1:{port}/json/list", timeout=30).json()
-        page = next(t for t in targets if t["type"] == "page")
-        with connect(page["webSocketDebuggerUrl"], max_size=None, open_timeout=30) as ws:
-            session = DevTools(ws)
-            session.call("Emulation.setDeviceMetricsOverride", width=1200, height=800,
-                         deviceScaleFactor=1, mobile=False)
-            yield session
-    finally:
-        with contextlib.suppress(ProcessLookupError):
-            os.killpg(process.pid, signal.SIGTERM)  # chromium and its helper processes
-        try:
-            process.wait(timeout=20)
-        except subprocess.TimeoutExpired:
-            os.killpg(process.pid, signal.SIGKILL)
-            process.wait()
-
 
 @pytest.fixture(scope="module")
 def live_server(tmp_path_factory):
