@@ -88,3 +88,15 @@ def test_thinning_keeps_its_share_by_coordinates_only():
     everything = np.ones(len(pts), bool)
     thinned(pts, 1.0, everything)
     assert everything.all()
+
+
+def test_a_thin_wall_is_not_taken_for_a_dense_cloud():
+    # the 192-neighbor patches of a plate 4 spacings thick reach its other side: their residual
+    # is the wall's thickness, not noise (wide noise 0.65 against 0.04 over 24 neighbors);
+    # thinned, its rims (k = 33) read 0
+    cloud = synthetic.thin_plate(noise=0.1, seed=1)
+    res = curvature.estimate(cloud.points, normals=cloud.normals)
+    plan = res.info["plan"]
+    assert plan["wide_noise"] > 0.45 and plan["dense"] is None
+    rim = cloud.region_mask("rim")
+    assert np.median(res.k1[rim]) > 10.0
