@@ -99,6 +99,23 @@ def analytic() -> None:
         print(f"{label} | " + " | ".join(cells), flush=True)
 
 
+def speed(data: Path, repeats: int) -> None:
+    """Median seconds of knn 24 with each fit on bun000, runs interleaved."""
+    cloud = curvature.read(data / "bun000.ply")
+    fits = ("implicit", "monge", "adaptive")
+    times = {f: [] for f in fits}
+    for f in fits:  # compile and load outside the timed runs
+        curvature.estimate(cloud, "knn", fit=f)
+    for _ in range(repeats):
+        for f in fits:
+            res = curvature.estimate(cloud, "knn", fit=f)
+            times[f].append(res.info["timings"]["fit"])
+    base = np.median(times["monge"])
+    for f in fits:
+        print(f"fit time, knn 24 on bun000, {f}: median {np.median(times[f]):.3f} s "
+              f"({np.median(times[f]) / base:.2f} x monge)", flush=True)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", type=Path, default=Path("/work/shared/data"))
@@ -107,7 +124,12 @@ def main() -> None:
                         help="keep every n-th row and column of organized scans")
     parser.add_argument("--skip-analytic", action="store_true")
     parser.add_argument("--only", default="", help="settings whose name contains this")
+    parser.add_argument("--speed", type=int, default=0, metavar="N",
+                        help="only time the fits, N interleaved runs each")
     args = parser.parse_args()
+    if args.speed:
+        speed(args.data, args.speed)
+        return
     for name in [c for c in CANDIDATES if args.only not in c]:
         del CANDIDATES[name]
     if not args.skip_analytic:

@@ -37,9 +37,10 @@ from .validation import as_faces, as_points, as_vectors
 
 ORIENTATIONS = ("auto", "normals", "viewpoint")
 DEFAULT_METHOD = "auto"
-# Fit of the neighborhood methods when none is named (docs/defaults.md measures "monge" as
-# the saner choice on real scans; not switched yet).
-DEFAULT_FIT = "implicit"
+# Fit of the neighborhood methods when none is named: the implicit quadric where it fits the
+# neighborhood (exact on quadrics), the height function where noise would make the implicit
+# one speckle (real scans); measured in docs/defaults.md.
+DEFAULT_FIT = "adaptive"
 #: Named configurations: ``estimate(points, preset="paper")``.
 PRESETS = {
     # The paper's own setting: Territory Claiming grown to 10 neighbors from 30 candidates,
@@ -161,12 +162,15 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
         itself (:mod:`curvature.auto`; parameters ``k``, ``normal_k``, ``noise_threshold``).
         The others are the neighborhood methods of DESIGN.md 4.1-4.4; their parameters go in
         ``**params``.
-    fit : {"implicit", "monge", "nfr"}, optional
-        Fit model of the neighborhood methods (DESIGN.md 4.5; default "implicit").
-        ``solver="taubin"|"algebraic"`` selects the implicit solver. "nfr" (normal-field
-        regression) regresses PCA normals (``normal_k`` neighbors) on position over the
-        neighborhood; it is made for large neighborhoods on noisy data. Method "auto" chooses
-        its own fit and takes none.
+    fit : {"adaptive", "implicit", "monge", "nfr"}, optional
+        Fit model of the neighborhood methods (DESIGN.md 4.5). The default, "adaptive",
+        keeps the implicit quadric where its RMS residual is at most ``clean_residual``
+        (0.01) of the RMS neighbor distance, which makes it exact on quadrics, and fits the
+        height function ("monge") elsewhere, which stays sane on noisy scans (see
+        docs/defaults.md). ``solver="taubin"|"algebraic"`` selects the implicit solver.
+        "nfr" (normal-field regression) regresses PCA normals (``normal_k`` neighbors) on
+        position over the neighborhood; it is made for large neighborhoods on noisy data.
+        Method "auto" chooses its own fit and takes none.
     preset : {"paper"}, optional
         A named configuration: "paper" is the paper's Territory Claiming with 10 neighbors and
         the implicit quadric. Parameters given beside it override its values.

@@ -117,7 +117,7 @@ def steps() -> Iterator[Step]:
         yield f"auto noisy, {threads}", run(noisy.points)
         yield f"auto noisy at one scale, {threads}", run(noisy.points, scale_gamma=0.0)
         for fit, extra in (("implicit", {}), ("implicit", {"solver": "algebraic"}),
-                           ("monge", {}), ("nfr", {"k": 60})):
+                           ("monge", {}), ("adaptive", {}), ("nfr", {"k": 60})):
             yield (f"knn {fit} {extra or ''}, {threads}",
                    run(clean.points, "knn", fit=fit, **{"k": 24, **extra}))
         yield f"tc, {threads}", run(clean.points, "tc")

@@ -104,7 +104,10 @@ class CommonParams(OrientationParams):
     model_config = ConfigDict(extra="forbid", json_schema_extra=_fit_only_schema)
 
     fit: Literal[tuple(curvature.FITS)] = Field(
-        DEFAULT_FIT, description="Quadric model fitted to each neighborhood.")
+        DEFAULT_FIT, description="Quadric model fitted to each neighborhood. 'adaptive' (the "
+        "default): the implicit quadric where it fits the points (exact on quadrics), the "
+        "height function where noise would make it speckle; preset 'paper' is the implicit "
+        "one over 10 Territory Claiming neighbors.")
 
     @model_validator(mode="after")
     def _consistent(self):
