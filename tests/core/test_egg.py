@@ -149,10 +149,12 @@ def torus(n, seed=0, R=2.0, r=1.0):
 
 
 def test_torus_sizes():
-    nb = neighbors(torus(10_000), "egg")
+    pts = torus(10_000)
+    params = EggFinder(pts).params  # the defaults: at least min_neighbors of the candidates
+    nb = neighbors(pts, "egg")
     sizes = nb.sizes()
-    assert sizes.min() >= 10 and sizes.max() <= 30
-    assert 10 <= sizes.mean() <= 20
+    assert sizes.min() >= params["min_neighbors"] and sizes.max() <= params["candidates"]
+    assert params["min_neighbors"] <= sizes.mean() <= 2 * params["min_neighbors"]
     for j in range(0, 10_000, 101):
         assert j not in nb[j]
 

@@ -184,3 +184,26 @@ def test_3mf_errors_zip_bomb_and_not_a_zip():
         z.writestr("3D/3dmodel.model", b"<model><resources><object id='1'>")
     with pytest.raises(FormatError, match="3dmodel.model"):
         read_bytes(buffer.getvalue(), "3mf")
+
+
+# --- fuzzing: a corrupted file is a FormatError, nothing else -------------------------------
+
+@pytest.mark.parametrize("fmt", ["glb", "3mf"])
+def test_corrupted_mesh_files_raise_only_format_errors(fmt):
+    from hypothesis import HealthCheck, given, settings
+    from test_io_fuzz import corruptions
+
+    seed = two_mesh_scene().export(file_type=fmt)
+    assert len(read_bytes(seed, fmt)) >= 10
+
+    @settings(max_examples=40, deadline=None, derandomize=True, database=None,
+              suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+    @given(corruptions(seed))
+    def check(data):
+        try:
+            cloud = read_bytes(data, fmt)
+        except FormatError:
+            return
+        assert cloud.points.shape[1] == 3 and len(cloud) >= 10
+
+    check()
