@@ -174,7 +174,7 @@ def test_chunking_and_workers_do_not_change_results():
 
 @pytest.mark.parametrize("params, message", [
     (dict(alpha_step=0.8), "method 'egg': alpha_step (0.8) must be <= alpha_start (0.7)"),
-    (dict(candidates=8), "method 'egg': candidates (8) must be >= min_neighbors (10)"),
+    (dict(candidates=8), "method 'egg': candidates (8) must be >= min_neighbors (24)"),
     (dict(alpha_start=1.5), "parameter 'alpha_start' must be <= 1.0"),
     (dict(alpha_step=0.0), "parameter 'alpha_step' must be >= 0.001"),
     (dict(candidates="many"), "parameter 'candidates' must be int"),
