@@ -52,7 +52,7 @@ def file_viewpoint(cloud: PointCloud, orientation, normals, viewpoint):
 
     Returns
     -------
-    ndarray, shape (3,), or None
+    ndarray, shape (3,) or (n, 3), or None
     """
     if cloud.viewpoint is None or viewpoint is not None:
         return None

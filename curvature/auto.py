@@ -298,7 +298,7 @@ def plan_auto(points: np.ndarray, tree: tuple, noise_threshold: float,
     m = sample.shape[0]
     outs = [np.empty(m), np.empty(m), np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3)),
             np.empty(m), np.empty(m, np.int8)]
-    fit_batch(points, sample, indptr, indices, FIT_MONGE, SOLVER_TAUBIN, True, *outs)
+    fit_batch(points, sample, indptr, indices, FIT_MONGE, SOLVER_TAUBIN, True, 0.0, *outs)
     residual = outs[5][outs[6] == Status.OK]
     noise = float(np.median(residual)) / spacing if residual.size and spacing > 0 else np.inf
     if not spacing > 0.0:  # every point coincides with its 24 nearest: any cell works
@@ -499,7 +499,7 @@ class AutoRun:
         degenerate; :meth:`run` gives such points the anchored fits.
         """
         fit_batch(self.points, query, *_prefix_csr(nbr, kp), FIT_IMPLICIT, SOLVER_TAUBIN, True,
-                  *_outputs(res, sl))
+                  0.0, *_outputs(res, sl))
         res.neighbor_count[sl] = kp
         floor = CLEAN_EXACT * self.plan.spacing
         rows = np.flatnonzero(~(res.residual[sl] <= floor))  # NaN (failed) included
@@ -510,7 +510,7 @@ class AutoRun:
                 continue
             out = _OutputView(res, sl.start + rows)
             fit_batch(self.points, query[rows], *_prefix_csr(nbr[rows], size), FIT_IMPLICIT,
-                      SOLVER_TAUBIN, True, *out.arrays)
+                      SOLVER_TAUBIN, True, 0.0, *out.arrays)
             resid = np.where(out.arrays[6] == Status.OK, out.arrays[5], np.inf)
             best = np.minimum(best, resid)
             # Sizes go down: keep this one only where the larger kept one is not near the best.

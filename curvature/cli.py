@@ -93,7 +93,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="named configuration: 'paper' is Territory Claiming with 10 neighbors "
                           "and the implicit quadric")
     est.add_argument("--fit", default=None, choices=FITS,
-                     help="fit model of a neighborhood method (default: implicit)")
+                     help="fit model of a neighborhood method (default: adaptive, the "
+                          "implicit quadric where it fits, the height function elsewhere)")
     est.add_argument("--solver", default=None, choices=SOLVERS,
                      help="implicit quadric solver (default taubin)")
     est.add_argument("--orientation", default=None, choices=ORIENTATIONS,

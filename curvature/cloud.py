@@ -30,9 +30,10 @@ class PointCloud:
         NaN rows included); None means ``0 .. n-1``.
     grid : tuple of int (width, height), or None
         Size of an organized scan's grid; ``index = row * width + col``.
-    viewpoint : ndarray, shape (3,), float64, or None
+    viewpoint : ndarray, shape (3,) or (n, 3), float64, or None
         Scanner position the file records (PCD VIEWPOINT, E57 pose, PLY comment), for
-        orienting a single-view scan.
+        orienting a single-view scan; one row per point when the file holds several scans
+        (each point's own scan origin, E57).
     viewpoint_source : str or None
         Where ``viewpoint`` came from, e.g. ``"PCD VIEWPOINT"``, for the result's info.
     """

@@ -30,8 +30,9 @@ def signs_from_normals(est: np.ndarray, given: np.ndarray) -> np.ndarray:
 
 
 def signs_from_viewpoint(points: np.ndarray, est: np.ndarray, viewpoint) -> np.ndarray:
-    """Signs making normals face ``viewpoint`` (3,), e.g. the scanner position."""
-    to_view = np.asarray(viewpoint, np.float64)[None, :] - points
+    """Signs making normals face ``viewpoint``: the scanner position (3,), or one per point
+    (n, 3), e.g. the origin of the scan each point belongs to."""
+    to_view = np.asarray(viewpoint, np.float64) - points
     return signs_from_normals(est, to_view)
 
 

@@ -37,9 +37,10 @@ from .validation import as_faces, as_points, as_vectors
 
 ORIENTATIONS = ("auto", "normals", "viewpoint")
 DEFAULT_METHOD = "auto"
-# Fit of the neighborhood methods when none is named (docs/defaults.md measures "monge" as
-# the saner choice on real scans; not switched yet).
-DEFAULT_FIT = "implicit"
+# Fit of the neighborhood methods when none is named: the implicit quadric where it fits the
+# neighborhood (exact on quadrics), the height function where noise would make the implicit
+# one speckle (real scans); measured in docs/defaults.md.
+DEFAULT_FIT = "adaptive"
 #: Named configurations: ``estimate(points, preset="paper")``.
 PRESETS = {
     # The paper's own setting: Territory Claiming grown to 10 neighbors from 30 candidates,
@@ -94,16 +95,26 @@ def resolve_orientation(orientation, normals, viewpoint) -> str:
     return orientation
 
 
-def check_viewpoint(viewpoint) -> np.ndarray | None:
-    """A viewpoint as a finite float64 (3,) array."""
+def check_viewpoint(viewpoint, n: int) -> np.ndarray | None:
+    """A viewpoint as a finite float64 array: shape (3,), or (n, 3) for one per point."""
     if viewpoint is None:
         return None
     try:
-        vp = np.asarray(viewpoint, np.float64).reshape(-1)
+        vp = np.asarray(viewpoint, np.float64)
     except (TypeError, ValueError):
         raise ParameterError(f"viewpoint must be three numbers, got {viewpoint!r}") from None
+    if vp.ndim == 2 and vp.shape[1] == 3 and vp.shape[0] != 1:
+        if vp.shape[0] != n:
+            raise ParameterError(f"per-point viewpoints must have shape ({n}, 3) to match "
+                                 f"the {n} points, got {vp.shape}")
+        bad = np.flatnonzero(~np.isfinite(vp).all(axis=1))
+        if bad.size:
+            raise ParameterError(f"the viewpoint of point {int(bad[0])} is not finite")
+        return vp
+    vp = vp.reshape(-1)
     if vp.shape != (3,) or not np.isfinite(vp).all():
-        raise ParameterError(f"viewpoint must be three finite numbers, got {viewpoint!r}")
+        raise ParameterError(f"viewpoint must be three finite numbers (or one row per point), "
+                             f"got {viewpoint!r}")
     return vp
 
 
@@ -151,12 +162,15 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
         itself (:mod:`curvature.auto`; parameters ``k``, ``normal_k``, ``noise_threshold``).
         The others are the neighborhood methods of DESIGN.md 4.1-4.4; their parameters go in
         ``**params``.
-    fit : {"implicit", "monge", "nfr"}, optional
-        Fit model of the neighborhood methods (DESIGN.md 4.5; default "implicit").
-        ``solver="taubin"|"algebraic"`` selects the implicit solver. "nfr" (normal-field
-        regression) regresses PCA normals (``normal_k`` neighbors) on position over the
-        neighborhood; it is made for large neighborhoods on noisy data. Method "auto" chooses
-        its own fit and takes none.
+    fit : {"adaptive", "implicit", "monge", "nfr"}, optional
+        Fit model of the neighborhood methods (DESIGN.md 4.5). The default, "adaptive",
+        keeps the implicit quadric where its RMS residual is at most ``clean_residual``
+        (0.01) of the RMS neighbor distance, which makes it exact on quadrics, and fits the
+        height function ("monge") elsewhere, which stays sane on noisy scans (see
+        docs/defaults.md). ``solver="taubin"|"algebraic"`` selects the implicit solver.
+        "nfr" (normal-field regression) regresses PCA normals (``normal_k`` neighbors) on
+        position over the neighborhood; it is made for large neighborhoods on noisy data.
+        Method "auto" chooses its own fit and takes none.
     preset : {"paper"}, optional
         A named configuration: "paper" is the paper's Territory Claiming with 10 neighbors and
         the implicit quadric. Parameters given beside it override its values.
@@ -165,8 +179,9 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
         when a viewpoint is given, else "auto".
     normals : array_like, shape (n, 3), optional
         Reference normals (e.g. from the scanner); estimated normals are flipped to agree.
-    viewpoint : array_like, shape (3,), optional
-        Scanner position; normals are turned to face it.
+    viewpoint : array_like, shape (3,) or (n, 3), optional
+        Scanner position, or one per point (e.g. each point's scan origin in a file of
+        several scans); normals are turned to face it.
     faces : array_like, shape (m, 3), optional
         Mesh triangles for ``method="mesh"``; kept in the result.
     workers : int, optional
@@ -219,7 +234,7 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
     n = pts.shape[0]
     ref_normals = None if normals is None else as_vectors(normals, n, "normals")
     tri = as_faces(faces, n)
-    vp = check_viewpoint(viewpoint)
+    vp = check_viewpoint(viewpoint, n)
     req = resolve_request(preset, method, fit, params, orientation, ref_normals, vp, workers,
                           chunk_size)
     if executor is not None and not callable(getattr(executor, "submit", None)):
@@ -232,6 +247,7 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
     inv = inverse_permutation(order)
     spts = np.ascontiguousarray(pts[order])
     s_normals = None if ref_normals is None else ref_normals[order]
+    s_vp = vp[order] if vp is not None and vp.ndim == 2 else vp
     s_faces = None if tri is None else inv[tri]
     del order
     with numba_threads(req.workers):
@@ -244,7 +260,7 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
             res, graph, info, timings = run_tiled(spts, s_faces, req, tiles, progress,
                                                   executor)
         t0 = time.perf_counter()
-        orient(res, req.mode, s_normals, vp, graph)
+        orient(res, req.mode, s_normals, s_vp, graph)
         timings["orientation"] = time.perf_counter() - t0
     del graph
     res = unpermute(res, inv, pts, tri)
@@ -258,7 +274,7 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
         "orientation_rule": orientation_rule(req.mode, from_file=vp_source,
                                              normals_from_file=file_normals),
     }
-    if vp is not None:
+    if vp is not None and vp.ndim == 1:
         res.info["viewpoint"] = vp.tolist()
     return res if cloud is None else carry_input(res, cloud)
 
@@ -434,7 +450,7 @@ def fit_chunks(spts, finder, res, graph, fit, fit_opts, nthreads, chunk_size, pr
         nbhd = finder.query(q, workers=nthreads)
         t1 = time.perf_counter()
         out = fit_neighborhoods(spts, q, nbhd, fit, fit_opts["solver"],
-                                fit_opts["include_self"], stage1)
+                                fit_opts["include_self"], stage1, fit_opts["clean_residual"])
         timings["neighbors"] += t1 - t0
         timings["fit"] += time.perf_counter() - t1
         sl = slice(start, stop)

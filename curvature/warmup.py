@@ -120,7 +120,7 @@ def steps() -> Iterator[Step]:
         yield f"auto noisy at one scale, {threads}", run(noisy.points, scale_gamma=0.0)
         yield f"auto dense, {threads}", run(dense.points, dense_noise=0.25)
         for fit, extra in (("implicit", {}), ("implicit", {"solver": "algebraic"}),
-                           ("monge", {}), ("nfr", {"k": 60})):
+                           ("monge", {}), ("adaptive", {}), ("nfr", {"k": 60})):
             yield (f"knn {fit} {extra or ''}, {threads}",
                    run(clean.points, "knn", fit=fit, **{"k": 24, **extra}))
         yield f"tc, {threads}", run(clean.points, "tc")

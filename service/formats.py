@@ -4,7 +4,7 @@ from __future__ import annotations
 
 # Input formats the library reads (DESIGN.md section 6), by file extension.
 INPUT_EXTENSIONS = ("ply", "pcd", "xyz", "csv", "txt", "asc", "npy", "npz", "obj", "stl", "off",
-                    "las", "laz", "e57")
+                    "glb", "gltf", "3mf", "las", "laz", "e57")
 
 # Result formats and the media type each is served with. PLY has no registered media type;
 # application/x-ply is the de-facto one (model/ply, application/ply and

@@ -34,8 +34,8 @@ DEFAULT_METHOD = curvature.DEFAULT_METHOD
 DEFAULT_FIT = curvature.DEFAULT_FIT
 
 FIT_PARAMS: tuple[ParamSpec, ...] = tuple(curvature.FIT_PARAMS)
-# Parameters that only make sense for one fit model.
-FIT_ONLY = dict(curvature.fitting.FIT_ONLY)
+# Parameters that only make sense for some fit models (name -> those models).
+FIT_ONLY: dict[str, tuple[str, ...]] = dict(curvature.fitting.FIT_ONLY)
 
 
 def _annotation(spec: ParamSpec) -> Any:
@@ -81,16 +81,16 @@ class OrientationParams(BaseModel):
 
 def _fit_only_schema(schema: dict) -> None:
     """Say in the JSON schema what :meth:`CommonParams._consistent` enforces: a fit-only
-    parameter (e.g. ``solver``) is refused unless ``fit`` is its model (the default fit
-    counts when ``fit`` is absent)."""
+    parameter (e.g. ``solver``) is refused unless ``fit`` is one of its models (the default
+    fit counts when ``fit`` is absent)."""
     rules = []
     default_fit = schema.get("properties", {}).get("fit", {}).get("default")
-    for name, only_fit in FIT_ONLY.items():
+    for name, only_fits in FIT_ONLY.items():
         if name not in schema.get("properties", {}):
             continue
         other_fit = {"required": ["fit"],
-                     "properties": {"fit": {"not": {"const": only_fit}}}}
-        if default_fit != only_fit:  # an absent fit is another fit too
+                     "properties": {"fit": {"not": {"enum": list(only_fits)}}}}
+        if default_fit not in only_fits:  # an absent fit is another fit too
             other_fit = {"anyOf": [other_fit, {"not": {"required": ["fit"]}}]}
         rules.append({"if": other_fit,
                       "then": {"properties": {name: {"type": "null"}}}})
@@ -104,13 +104,17 @@ class CommonParams(OrientationParams):
     model_config = ConfigDict(extra="forbid", json_schema_extra=_fit_only_schema)
 
     fit: Literal[tuple(curvature.FITS)] = Field(
-        DEFAULT_FIT, description="Quadric model fitted to each neighborhood.")
+        DEFAULT_FIT, description="Quadric model fitted to each neighborhood. 'adaptive' (the "
+        "default): the implicit quadric where it fits the points (exact on quadrics), the "
+        "height function where noise would make it speckle; preset 'paper' is the implicit "
+        "one over 10 Territory Claiming neighbors.")
 
     @model_validator(mode="after")
     def _consistent(self):
-        for name, only_fit in FIT_ONLY.items():
-            if getattr(self, name, None) is not None and self.fit != only_fit:
-                raise ValueError(f"'{name}' applies to fit '{only_fit}' only")
+        for name, only_fits in FIT_ONLY.items():
+            if getattr(self, name, None) is not None and self.fit not in only_fits:
+                raise ValueError(f"'{name}' applies to fit "
+                                 f"{' and '.join(repr(f) for f in only_fits)} only")
         return self
 
 
@@ -285,7 +289,7 @@ class ParameterInfo(BaseModel):
     maximum: float | None = None
     choices: list[Any] | None = None
     help: str = ""
-    applies_to_fit: str | None = None
+    applies_to_fit: list[str] | None = None
 
 
 class MethodInfo(BaseModel):
@@ -308,11 +312,12 @@ class MethodsResponse(BaseModel):
     result_formats: list[str]
 
 
-def parameter_info(spec: ParamSpec, applies_to_fit: str | None = None) -> ParameterInfo:
+def parameter_info(spec: ParamSpec, applies_to_fit=None) -> ParameterInfo:
     return ParameterInfo(name=spec.name, type=spec.kind.__name__, default=spec.default,
                          minimum=spec.minimum, maximum=spec.maximum,
                          choices=list(spec.choices) if spec.choices else None, help=spec.help,
-                         applies_to_fit=applies_to_fit)
+                         applies_to_fit=None if applies_to_fit is None
+                         else list(applies_to_fit))
 
 
 def methods_response() -> MethodsResponse:
@@ -325,7 +330,7 @@ def methods_response() -> MethodsResponse:
                                   parameters=[parameter_info(s) for s in finder.PARAMS]))
     fits = [FitInfo(name=fit, parameters=[
         parameter_info(s, FIT_ONLY.get(s.name)) for s in FIT_PARAMS
-        if FIT_ONLY.get(s.name) in (None, fit)]) for fit in curvature.FITS]
+        if fit in FIT_ONLY.get(s.name, (fit,))]) for fit in curvature.FITS]
     return MethodsResponse(methods=methods, fits=fits,
                            orientations=list(curvature.ORIENTATIONS),
                            default_method=DEFAULT_METHOD, input_formats=list(INPUT_EXTENSIONS),

@@ -9,10 +9,18 @@ import numpy as np
 from ..errors import ParameterError
 from ..neighborhoods.base import Neighborhoods
 from ..params import ParamSpec, resolve_params
-from .kernels import FIT_IMPLICIT, FIT_MONGE, SOLVER_ALGEBRAIC, SOLVER_TAUBIN, fit_batch
+from .kernels import (
+    FIT_ADAPTIVE,
+    FIT_IMPLICIT,
+    FIT_MONGE,
+    SOLVER_ALGEBRAIC,
+    SOLVER_TAUBIN,
+    fit_batch,
+)
 from .normal_field import nfr_batch, pca_normals
 
-FITS = ("implicit", "monge", "nfr")
+FITS = ("adaptive", "implicit", "monge", "nfr")
+FIT_CODES = {"adaptive": FIT_ADAPTIVE, "implicit": FIT_IMPLICIT, "monge": FIT_MONGE}
 SOLVERS = ("taubin", "algebraic")
 FIT_PARAMS = (
     ParamSpec("solver", str, "taubin", help="implicit quadric solver: Taubin (default) or "
@@ -20,9 +28,14 @@ FIT_PARAMS = (
     ParamSpec("include_self", bool, True, help="include the query point itself in its fit"),
     ParamSpec("normal_k", int, 48, 6, 1024,
               help="fit 'nfr' only: neighbors of the stage-1 PCA normals"),
+    ParamSpec("clean_residual", float, 0.01, 0.0, 1.0,
+              help="fit 'adaptive' only: the implicit quadric is kept where its RMS residual "
+                   "is at most this fraction of the RMS neighbor distance; elsewhere the "
+                   "height function is fitted"),
 )
-# Parameters that belong to one fit model only.
-FIT_ONLY = {"solver": "implicit", "normal_k": "nfr"}
+# Parameters that belong to some fit models only.
+FIT_ONLY = {"solver": ("implicit", "adaptive"), "normal_k": ("nfr",),
+            "clean_residual": ("adaptive",)}
 
 
 @dataclass
@@ -51,16 +64,18 @@ def resolve_fit(fit: str, params: dict) -> dict:
     if fit not in FITS:
         raise ParameterError(f"unknown fit {fit!r}; choose one of {list(FITS)}")
     checked = resolve_params(FIT_PARAMS, params, f"fit '{fit}'")
-    for name, owner in FIT_ONLY.items():
-        if params.get(name) is not None and fit != owner:
+    for name, owners in FIT_ONLY.items():
+        if params.get(name) is not None and fit not in owners:
             raise ParameterError(
-                f"fit '{fit}': parameter '{name}' applies to fit '{owner}' only")
+                f"fit '{fit}': parameter '{name}' applies to fit "
+                f"{' and '.join(repr(o) for o in owners)} only")
     return checked
 
 
 def fit_neighborhoods(points: np.ndarray, query: np.ndarray, nbhd: Neighborhoods,
                       fit: str = "implicit", solver: str = "taubin",
-                      include_self: bool = True, stage1: np.ndarray | None = None) -> FitOutput:
+                      include_self: bool = True, stage1: np.ndarray | None = None,
+                      clean_residual: float = 0.01) -> FitOutput:
     """Fit a quadric to every query point's neighborhood.
 
     Parameters
@@ -71,13 +86,16 @@ def fit_neighborhoods(points: np.ndarray, query: np.ndarray, nbhd: Neighborhoods
         Query point indices.
     nbhd : Neighborhoods
         Their neighborhoods, one per query point.
-    fit : {"implicit", "monge", "nfr"}
+    fit : {"adaptive", "implicit", "monge", "nfr"}
     solver : {"taubin", "algebraic"}
         Implicit quadric solver.
     include_self : bool
         Include the query point itself in its fit (DESIGN.md 4).
     stage1 : ndarray, shape (n, 3), optional
         Stage-1 normals of every point, required by fit "nfr" (see :func:`stage1_normals`).
+    clean_residual : float
+        Fit "adaptive": largest RMS residual of a kept implicit quadric, as a fraction of the
+        RMS neighbor distance.
 
     Returns
     -------
@@ -96,10 +114,9 @@ def fit_neighborhoods(points: np.ndarray, query: np.ndarray, nbhd: Neighborhoods
         nfr_batch(points, stage1, query, nbhd.indptr, nbhd.indices, bool(include_self),
                   *outputs)
     else:
-        fit_batch(points, query, nbhd.indptr, nbhd.indices,
-                  FIT_IMPLICIT if fit == "implicit" else FIT_MONGE,
+        fit_batch(points, query, nbhd.indptr, nbhd.indices, FIT_CODES[fit],
                   SOLVER_TAUBIN if solver == "taubin" else SOLVER_ALGEBRAIC,
-                  bool(include_self), *outputs)
+                  bool(include_self), float(clean_residual), *outputs)
     return out
 
 

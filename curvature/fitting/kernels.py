@@ -34,6 +34,9 @@ from .quadric import (
 
 FIT_IMPLICIT = 0
 FIT_MONGE = 1
+# The implicit quadric where it fits the neighborhood (clean data, exact on quadrics), else
+# the height function (noisy data, where the implicit quadric bends to fit the noise).
+FIT_ADAPTIVE = 2
 SOLVER_TAUBIN = 0
 SOLVER_ALGEBRAIC = 1
 SQRT2 = np.sqrt(2.0)
@@ -234,7 +237,7 @@ def fit_monge(xs, v):
 
 
 @njit(parallel=True, cache=True)
-def fit_batch(points, query, indptr, indices, fit, solver, include_self,
+def fit_batch(points, query, indptr, indices, fit, solver, include_self, clean_residual,
               k1, k2, normals, dir1, dir2, residual, status):
     """Fit every query point's neighborhood and write curvature into the output arrays.
 
@@ -248,11 +251,15 @@ def fit_batch(points, query, indptr, indices, fit, solver, include_self,
     indices : ndarray, shape (nnz,), int32 or int64
         Neighborhoods of the query points (CSR, query point not listed).
     fit : int
-        FIT_IMPLICIT or FIT_MONGE.
+        FIT_IMPLICIT, FIT_MONGE or FIT_ADAPTIVE.
     solver : int
         SOLVER_TAUBIN or SOLVER_ALGEBRAIC (implicit only).
     include_self : bool
         Whether p itself takes part in the fit.
+    clean_residual : float
+        FIT_ADAPTIVE only: the implicit quadric is kept where its RMS residual is at most
+        this fraction of the RMS neighbor distance (and it has a foot point); elsewhere the
+        height function is fitted instead.
     k1, k2, residual : ndarray, shape (m,), float64
         Outputs, NaN where the status is not OK.
     normals, dir1, dir2 : ndarray, shape (m, 3), float64
@@ -277,20 +284,33 @@ def fit_batch(points, query, indptr, indices, fit, solver, include_self,
         if not spans_surface(w):  # coincident or collinear: no surface to fit
             status[j] = DEGENERATE
             continue
-        if fit == FIT_IMPLICIT:
+        a = np.zeros((3, 3))
+        b = np.zeros(3)
+        c = 0.0
+        x0 = np.zeros(3)
+        ok = False
+        found = False
+        rel = np.inf
+        if fit != FIT_MONGE and count >= MIN_POINTS_IMPLICIT:
             a, b, c, ok = fit_implicit(xs, solver)
-        else:
+            if ok:
+                x0, found = foot_point(a, b, c, MAX_FOOT_DIST)
+                rel = sampson_rms(a, b, c, xs)
+        if fit == FIT_MONGE or (fit == FIT_ADAPTIVE and not (found and rel <= clean_residual)):
             a, b, c, ok = fit_monge(xs, axes)
+            found = False
+            if ok:
+                x0, found = foot_point(a, b, c, MAX_FOOT_DIST)
+                rel = sampson_rms(a, b, c, xs)
         if not ok:
             status[j] = DEGENERATE
             continue
-        x0, found = foot_point(a, b, c, MAX_FOOT_DIST)
         if not found:
             status[j] = NO_FOOT
             continue
         g = 2.0 * (a @ x0) + b
         c1, c2, n, d1, d2 = shape_operator(g, 2.0 * a)
-        res = sampson_rms(a, b, c, xs) * scale
+        res = rel * scale
         c1 /= scale
         c2 /= scale
         if not store_outputs(j, c1, c2, n, d1, d2, k1, k2, normals, dir1, dir2):

@@ -1,6 +1,6 @@
 """Reading and writing point clouds and curvature results (DESIGN.md section 6).
 
-Read: PLY, PCD, XYZ/CSV/TXT/ASC, NPY/NPZ, OBJ/STL/OFF, LAS/LAZ, E57.
+Read: PLY, PCD, XYZ/CSV/TXT/ASC, NPY/NPZ, OBJ/STL/OFF, GLB/glTF, 3MF, LAS/LAZ, E57.
 Write: PLY, CSV, NPZ, JSON, LAS/LAZ.
 Every malformed input raises :class:`~curvature.errors.FormatError` naming the file and,
 where it applies, the line or byte offset; an unknown extension raises
@@ -36,6 +36,7 @@ from .meshes import read_obj, read_off, read_stl
 from .pcd import read_pcd
 from .ply import read_ply, write_ply
 from .text import read_text, write_csv
+from .trimesh_meshes import read_3mf, read_glb, read_gltf
 
 _READERS: dict[str, Callable[[bytes, str | None], PointCloud]] = {
     "ply": read_ply,
@@ -49,6 +50,9 @@ _READERS: dict[str, Callable[[bytes, str | None], PointCloud]] = {
     "obj": read_obj,
     "stl": read_stl,
     "off": read_off,
+    "glb": read_glb,
+    "gltf": read_gltf,
+    "3mf": read_3mf,
     "las": read_las,
     "laz": read_las,
     "e57": read_e57,

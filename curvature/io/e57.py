@@ -4,9 +4,10 @@ Every scan of the file is read, its points put into the file's common frame by t
 pose; invalid points (``cartesianInvalidState``) are left out and ``index`` keeps every
 point's position in the file (scans one after another). Kept per point: ``intensity``,
 colours as ``red green blue``, ``scan`` (which scan), the scanner grid as ``scan_row`` and
-``scan_col``, normals from the ``nor:normalX/Y/Z`` extension (turned by the pose). A file
-with one scan records where the scanner stood (the pose's translation), which orients its
-normals by default.
+``scan_col``, normals from the ``nor:normalX/Y/Z`` extension (turned by the pose). Each
+scan's pose records where its scanner stood (the pose's translation): the cloud's viewpoint,
+one position for a single scan, one row per point (its own scan's origin) for several, which
+orients the normals by default.
 """
 
 from __future__ import annotations
@@ -75,7 +76,8 @@ def read_e57(data: bytes, source=None) -> PointCloud:
     -------
     PointCloud
         ``points`` (n, 3) float64 in the file's frame, ``normals`` when every scan has them,
-        ``properties`` (n,), ``index`` (n,), ``viewpoint`` for a single scan.
+        ``properties`` (n,), ``index`` (n,), ``viewpoint`` (3,) for a single scan or
+        (n, 3) for several (each point's scan origin).
 
     Raises
     ------
@@ -168,4 +170,9 @@ def _merge(scans: list[dict], source) -> PointCloud:
     cloud.index = index
     if len(scans) == 1:
         cloud.viewpoint, cloud.viewpoint_source = scans[0]["origin"], "E57 scan pose"
+    else:
+        origins = np.stack([s["origin"] for s in scans])
+        cloud.viewpoint = origins[props["scan"]]
+        cloud.viewpoint_source = (f"E57 scan poses: each point faces its own scan's origin, "
+                                  f"{len(scans)} scans")
     return cloud

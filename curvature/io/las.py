@@ -71,6 +71,9 @@ def read_las(data: bytes, source=None) -> PointCloud:
         with laspy.open(io.BytesIO(data)) as reader:
             header = reader.header
             _check_count(header, len(data), source)
+            if header.are_points_compressed:
+                check_chunk_table(data, int(header.offset_to_point_data),
+                                  int(header.point_count), source)
             las = reader.read()
     except FormatError:
         raise
@@ -171,6 +174,35 @@ def _check_count(header, size: int, source) -> None:
         raise FormatError(source, f"the header says {count} points of {stride} bytes "
                                   f"({count * stride} bytes) but only {body} bytes follow "
                                   "the header", offset=size)
+
+
+def check_chunk_table(data: bytes, start: int, count: int, source) -> None:
+    """Check the LAZ chunk table's place and chunk count before lazrs allocates for it.
+
+    The compressed points start with the 8-byte offset of the chunk table (-1 when the writer
+    left it out); the table starts with its version and the number of chunks, for each of
+    which lazrs allocates 16 bytes up front: a corrupt count asked it for 40 GB, and a failed
+    allocation aborts the process. Every chunk holds at least one point and one byte.
+
+    Raises
+    ------
+    FormatError
+        A table outside the file, or more chunks than points or bytes.
+    """
+    if start + 8 > len(data):
+        raise FormatError(source, "the compressed points end before their chunk table offset",
+                          offset=start)
+    table = struct.unpack_from("<q", data, start)[0]
+    if table == -1:
+        return
+    if not start + 8 <= table <= len(data) - 8:
+        raise FormatError(source, f"the LAZ chunk table offset {table} is outside the "
+                                  f"compressed points (bytes {start + 8} to {len(data)})",
+                          offset=start)
+    chunks = struct.unpack_from("<I", data, table + 4)[0]
+    if chunks > max(count, 1) or chunks > len(data) - start:
+        raise FormatError(source, f"the LAZ chunk table lists {chunks} chunks for {count} "
+                                  f"points in a {len(data)}-byte file", offset=table + 4)
 
 
 def _check_laszip(header, size: int, source) -> None:

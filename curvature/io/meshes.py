@@ -155,9 +155,9 @@ def read_stl(data: bytes, source=None) -> PointCloud:
                           **where(corner))
     if corners.shape[0] == 0:
         raise FormatError(source, "the file holds no triangles")
-    points, faces = _merge_corners(corners)
+    points, _, inverse = merge_identical(corners)
     cloud = finish_cloud(source, points, label="vertex")
-    cloud.faces = faces
+    cloud.faces = inverse.reshape(-1, 3)
     return cloud
 
 
@@ -200,15 +200,29 @@ def _stl_ascii(data, source):
     return corners, lambda c: {"line": lines[int(c)]}
 
 
-def _merge_corners(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unique vertices in first-appearance order, and triangles indexing them."""
-    pts = np.ascontiguousarray(corners + 0.0)  # + 0.0 turns -0.0 into 0.0: same vertex
+def merge_identical(points: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Merge vertices with identical coordinates, keeping first-appearance order.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3), float64
+
+    Returns
+    -------
+    unique : ndarray, shape (u, 3)
+    first : ndarray, shape (u,), int64
+        Row of ``points`` where each unique vertex first appears.
+    inverse : ndarray, shape (n,), int64
+        Unique vertex of every input row.
+    """
+    pts = np.ascontiguousarray(points + 0.0)  # + 0.0 turns -0.0 into 0.0: same vertex
     keys = pts.view(np.dtype((np.void, pts.dtype.itemsize * 3))).reshape(-1)
     _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
     order = np.argsort(first, kind="stable")
     rank = np.empty_like(order)
     rank[order] = np.arange(order.size)
-    return pts[first[order]], rank[inverse.reshape(-1)].reshape(-1, 3).astype(np.int64)
+    return (pts[first[order]], first[order].astype(np.int64),
+            rank[inverse.reshape(-1)].astype(np.int64))
 
 
 # --- OFF -----------------------------------------------------------------------------------

@@ -173,13 +173,13 @@ class EggFinder(TreeMixin, NeighborFinder):
 
     name = "egg"
     PARAMS = (
-        ParamSpec("candidates", int, 30, 2, 1000,
+        ParamSpec("candidates", int, 60, 2, 1000,
                   "nearest points examined (neighbors and possible blockers)"),
         ParamSpec("alpha_start", float, 0.7, 0.001, 1.0,
                   "first spheroid width across pq, as a fraction of |pq|/2 (1 = Gabriel)"),
         ParamSpec("alpha_step", float, 0.05, 0.001, 1.0,
                   "alpha is lowered by this step until enough neighbors are found"),
-        ParamSpec("min_neighbors", int, 10, 1, 1000,
+        ParamSpec("min_neighbors", int, 24, 1, 1000,
                   "alpha is lowered until at least this many neighbors are found"),
     )
 

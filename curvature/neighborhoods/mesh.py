@@ -29,7 +29,7 @@ class MeshFinder(TreeMixin, NeighborFinder):
 
     name = "mesh"
     PARAMS = (
-        ParamSpec("min_neighbors", int, 10, 1, 1000,
+        ParamSpec("min_neighbors", int, 24, 1, 1000,
                   "rings are added until at least this many neighbors are gathered"),
         ParamSpec("k_delaunay", int, 16, 3, 256,
                   "without faces: nearest neighbors triangulated in each point's tangent plane"),

@@ -221,7 +221,7 @@ class TerritoryFinder(TreeMixin, NeighborFinder):
 
     name = "tc"
     PARAMS = (
-        ParamSpec("candidates", int, 30, 2, 1000,
+        ParamSpec("candidates", int, 60, 2, 1000,
                   "nearest pool points examined per ring"),
         ParamSpec("beta_min", float, 1.0, 0.1, 10.0,
                   "smallest territory size tried (1 = Gabriel lune)"),
@@ -229,7 +229,7 @@ class TerritoryFinder(TreeMixin, NeighborFinder):
                   "largest territory size tried (2 = relative-neighborhood lune)"),
         ParamSpec("beta_step", float, 0.1, 0.001, 10.0,
                   "step between the beta values tried"),
-        ParamSpec("min_neighbors", int, 10, 1, 1000,
+        ParamSpec("min_neighbors", int, 24, 1, 1000,
                   "rings are added until at least this many neighbors are gathered"),
     )
 

@@ -38,16 +38,27 @@ def las_bytes(version="1.2", point_format=3, compress=False, n=N) -> bytes:
     return buffer.getvalue()
 
 
-def e57_file(path, scans=((0.0, 0.0, 0.0),), n=N, invalid_every=0):
+def rotation_matrix(quaternion) -> np.ndarray:
+    """The (3, 3) rotation of a unit quaternion (w, x, y, z)."""
+    w, x, y, z = np.asarray(quaternion, dtype=np.float64)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def e57_file(path, scans=((0.0, 0.0, 0.0),), n=N, invalid_every=0, rotations=None):
     """An E57 file of unit spheres, one per scan pose translation, with intensity and colours.
 
+    ``rotations`` gives each scan's pose rotation as a quaternion (w, x, y, z); identity by
+    default. Each sphere is centred on its scanner, so its points lie around the scan origin.
     Returns the points in the file's frame of every scan, valid ones only.
     """
     import pye57
 
     e57 = pye57.E57(str(path), mode="w")
     out = []
-    for s, origin in enumerate(scans):
+    rotations = [(1.0, 0.0, 0.0, 0.0)] * len(scans) if rotations is None else rotations
+    for s, (origin, quaternion) in enumerate(zip(scans, rotations, strict=True)):
         p = sphere(n, seed=s)
         invalid = np.zeros(n, np.int8)
         if invalid_every:
@@ -57,8 +68,8 @@ def e57_file(path, scans=((0.0, 0.0, 0.0),), n=N, invalid_every=0):
                 "colorRed": (np.arange(n) % 256).astype(np.uint8),
                 "colorGreen": np.full(n, s, np.uint8), "colorBlue": np.full(n, 200, np.uint8),
                 "cartesianInvalidState": invalid}
-        e57.write_scan_raw(data, rotation=np.array([1.0, 0.0, 0.0, 0.0]),
+        e57.write_scan_raw(data, rotation=np.asarray(quaternion, dtype=np.float64),
                            translation=np.asarray(origin, dtype=np.float64))
-        out.append(p[invalid == 0] + np.asarray(origin))
+        out.append(p[invalid == 0] @ rotation_matrix(quaternion).T + np.asarray(origin))
     e57.close()
     return out

@@ -149,10 +149,12 @@ def torus(n, seed=0, R=2.0, r=1.0):
 
 
 def test_torus_sizes():
-    nb = neighbors(torus(10_000), "egg")
+    pts = torus(10_000)
+    params = EggFinder(pts).params  # the defaults: at least min_neighbors of the candidates
+    nb = neighbors(pts, "egg")
     sizes = nb.sizes()
-    assert sizes.min() >= 10 and sizes.max() <= 30
-    assert 10 <= sizes.mean() <= 20
+    assert sizes.min() >= params["min_neighbors"] and sizes.max() <= params["candidates"]
+    assert params["min_neighbors"] <= sizes.mean() <= 2 * params["min_neighbors"]
     for j in range(0, 10_000, 101):
         assert j not in nb[j]
 
@@ -172,7 +174,7 @@ def test_chunking_and_workers_do_not_change_results():
 
 @pytest.mark.parametrize("params, message", [
     (dict(alpha_step=0.8), "method 'egg': alpha_step (0.8) must be <= alpha_start (0.7)"),
-    (dict(candidates=8), "method 'egg': candidates (8) must be >= min_neighbors (10)"),
+    (dict(candidates=8), "method 'egg': candidates (8) must be >= min_neighbors (24)"),
     (dict(alpha_start=1.5), "parameter 'alpha_start' must be <= 1.0"),
     (dict(alpha_step=0.0), "parameter 'alpha_step' must be >= 0.001"),
     (dict(candidates="many"), "parameter 'candidates' must be int"),

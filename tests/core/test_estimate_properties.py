@@ -115,11 +115,15 @@ def test_degenerate_points_get_status_not_exception():
 
 def test_too_few_neighbors_status():
     pts = synthetic.sphere(100, seed=16).points
-    res = curvature.estimate(pts, "knn", k=5)  # 6 points < 9 needed by the implicit quadric
+    # 6 points < 9 needed by the implicit quadric
+    res = curvature.estimate(pts, "knn", k=5, fit="implicit")
     assert np.all(res.status == curvature.Status.TOO_FEW_NEIGHBORS)
     assert np.all(np.isnan(res.k1))
     ok = curvature.estimate(pts, "knn", k=5, fit="monge")
     assert np.mean(ok.status == 0) > 0.9
+    # the adaptive fit (the default) falls back to the height function, which needs 6
+    adaptive = curvature.estimate(pts, "knn", k=5)
+    np.testing.assert_array_equal(adaptive.k1, ok.k1)
 
 
 def test_result_fields_and_counts(torus):
@@ -178,7 +182,7 @@ def test_bad_cloud_errors(points, match):
     ({"viewpoint": [1, 2]}, "three finite numbers"),
     ({"workers": 0}, "workers must be"),
     ({"solver": "qr"}, "must be one of"),
-    ({"fit": "monge", "solver": "algebraic"}, "applies to fit .implicit. only"),
+    ({"fit": "monge", "solver": "algebraic"}, "applies to fit .implicit. and .adaptive. only"),
     ({"normals": np.zeros((3, 3))}, r"expected shape \(50, 3\)"),
     ({"faces": [[0, 1, 99]]}, "outside 0..49"),
 ])

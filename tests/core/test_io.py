@@ -156,7 +156,7 @@ def assert_same_result(a: CurvatureResult, b: CurvatureResult, faces=True):
 
 def test_format_names_and_extension_dispatch():
     assert set(FORMATS_READ) == {"ply", "pcd", "xyz", "csv", "txt", "asc", "npy", "npz",
-                                 "obj", "stl", "off", "las", "laz", "e57"}
+                                 "obj", "stl", "off", "glb", "gltf", "3mf", "las", "laz", "e57"}
     assert FORMATS_WRITE == ("ply", "csv", "npz", "json", "las", "laz")
     assert format_from_path("a/b/SCAN.PLY") == "ply"
     assert format_from_path("x.Json") == "json"

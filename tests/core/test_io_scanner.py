@@ -71,7 +71,37 @@ def test_e57_several_scans_with_poses_and_invalid_points(tmp_path):
     assert np.array_equal(cloud.properties["scan"], np.repeat([0, 1], valid.size))
     assert np.array_equal(cloud.properties["red"], np.concatenate([valid % 256] * 2))
     assert np.array_equal(cloud.properties["green"], np.repeat([0, 1], valid.size))
-    assert cloud.viewpoint is None  # two scans: no single scanner position
+    # two scans: each point's viewpoint is its own scan's origin
+    np.testing.assert_array_equal(cloud.viewpoint, np.repeat([[0, 0, 0], [5.0, -1.0, 2.0]],
+                                                             valid.size, axis=0))
+
+
+def test_e57_two_scans_each_point_faces_its_own_scanner(tmp_path):
+    pytest.importorskip("pye57", reason="E57 needs the 'formats' extra (pye57)")
+    path = tmp_path / "two_poses.e57"
+    origins = np.array([[0.0, 0.0, 0.0], [4.0, 1.0, -0.5]])
+    turn = (np.cos(np.pi / 4), 0.0, 0.0, np.sin(np.pi / 4))  # 90 degrees about z
+    expected = e57_file(path, scans=origins, n=400, rotations=[(1.0, 0, 0, 0), turn])
+    cloud = curvature.read(path)
+    np.testing.assert_allclose(cloud.points, np.concatenate(expected), atol=1e-5)
+    res = curvature.estimate(cloud, "knn", k=16, workers=1)
+    assert res.info["orientation"] == "viewpoint"
+    assert res.info["orientation_rule"] == ("viewpoint from the file (E57 scan poses: each "
+                                            "point faces its own scan's origin, 2 scans)")
+    assert "viewpoint" not in res.info  # no single position to report
+    scan = res.attributes["scan"]
+    own = origins[scan] - res.points
+    facing = np.einsum("ij,ij->i", res.normals, own) > 0
+    ok = res.status == 0
+    assert facing[ok].all()
+    # each sphere is seen from its centre: normals point inwards, so H < 0 on both scans
+    for s in (0, 1):
+        assert np.mean(res.mean[ok & (scan == s)] < 0) > 0.99
+    # one viewpoint for the whole file (the first scan's) would turn about half of the
+    # second scan's normals the wrong way: the per-scan rule is what makes them right
+    single = curvature.estimate(cloud, "knn", k=16, workers=1, viewpoint=origins[0])
+    wrong = np.einsum("ij,ij->i", single.normals, own) < 0
+    assert 0.3 < wrong[ok & (scan == 1)].mean() < 0.7
 
 
 def test_e57_single_scan_pose_orients_normals_and_goes_to_las_and_ply(tmp_path):

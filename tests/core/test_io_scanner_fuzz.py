@@ -59,3 +59,20 @@ def test_lying_point_counts_are_refused_before_decoding(seeds):
     lying = laz[:107] + struct.pack("<I", 4_000_000_000) + laz[111:]
     with pytest.raises(FormatError, match="says 4000000000 points"):
         read_bytes(lying, "laz")
+
+
+def test_lying_laz_chunk_count_is_refused_before_lazrs_allocates(seeds):
+    """A fuzzed LAZ whose chunk table claimed 2,557,774,940 chunks made lazrs ask for 40 GB
+    and abort the process when the allocation failed."""
+    import struct
+
+    _, laz = seeds["laz"]
+    start = struct.unpack_from("<I", laz, 96)[0]
+    table = struct.unpack_from("<q", laz, start)[0]
+    lying = laz[:table + 4] + struct.pack("<I", 2_557_774_940) + laz[table + 8:]
+    with pytest.raises(FormatError, match="chunk table lists 2557774940 chunks") as err:
+        read_bytes(lying, "laz", source="scan.laz")
+    assert err.value.offset == table + 4 and "scan.laz" in str(err.value)
+    outside = laz[:start] + struct.pack("<q", len(laz) + 100) + laz[start + 8:]
+    with pytest.raises(FormatError, match="chunk table offset"):
+        read_bytes(outside, "laz")

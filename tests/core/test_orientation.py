@@ -86,3 +86,26 @@ def test_invalid_points_keep_their_sign_and_break_no_tree():
     assert np.all(signs[::7] == 1)
     ok = np.isfinite(normals).all(axis=1)
     assert np.all(signs[ok] == -1)
+
+
+def test_one_viewpoint_per_point():
+    """A viewpoint row per point (several scans): each normal faces its own viewpoint."""
+    import curvature
+    from curvature.errors import ParameterError
+
+    cloud = synthetic.sphere(3000, seed=4)
+    upper = cloud.points[:, 2] > 0
+    # upper half seen from the centre (normals in), lower half from far below (normals out)
+    views = np.where(upper[:, None], 0.0, np.array([0.0, 0.0, -10.0]))
+    res = curvature.estimate(cloud.points, "knn", viewpoint=views, workers=1)
+    ok = res.status == 0
+    radial = np.einsum("ij,ij->i", res.normals, cloud.points)
+    # from (0, 0, -10) the outer side of the unit sphere shows below z = -0.1 (some margin)
+    below = cloud.points[:, 2] < -0.2
+    assert np.all(radial[ok & upper] < 0) and np.all(radial[ok & below] > 0)
+    assert res.info["orientation"] == "viewpoint" and "viewpoint" not in res.info
+    with pytest.raises(ParameterError, match=r"shape \(3000, 3\).*got \(2999, 3\)"):
+        curvature.estimate(cloud.points, "knn", viewpoint=views[1:])
+    views[17] = np.nan
+    with pytest.raises(ParameterError, match="viewpoint of point 17 is not finite"):
+        curvature.estimate(cloud.points, "knn", viewpoint=views)

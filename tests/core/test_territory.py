@@ -125,14 +125,15 @@ def test_matches_reference_on_random_clouds(seed):
         assert got[j].tolist() == ref_tc(pts, int(p), **params), (seed, int(p), params)
 
 
-def test_default_parameters_match_reference():
+@pytest.mark.parametrize("params", [{}, {"min_neighbors": 10, "candidates": 30}])
+def test_default_and_paper_parameters_match_reference(params):
     rng = np.random.default_rng(11)
     pts = np.c_[rng.uniform(-1, 1, (400, 2)), 0.02 * rng.normal(size=400)]
-    finder = TerritoryFinder(pts)
+    finder = TerritoryFinder(pts, **params)
     queries = np.arange(0, 400, 9)
     got = finder.query(queries)
     for j, p in enumerate(queries):
-        assert got[j].tolist() == ref_tc(pts, int(p))
+        assert got[j].tolist() == ref_tc(pts, int(p), **dict(finder.params))
 
 
 # ---------------------------------------------------------------- hand-built cases
@@ -225,12 +226,15 @@ def torus(n, seed=0, R=2.0, r=1.0):
 
 
 def test_torus_sizes():
-    nb = neighbors(torus(10_000), "tc")
+    pts = torus(10_000)
+    params = TerritoryFinder(pts).params  # the defaults
+    low, cand = params["min_neighbors"], params["candidates"]
+    nb = neighbors(pts, "tc")
     sizes = nb.sizes()
     assert len(nb) == 10_000
-    assert sizes.min() >= 10
-    assert 10 <= sizes.mean() <= 16
-    assert sizes.max() <= 30 + 10 - 1
+    assert sizes.min() >= low
+    assert low <= sizes.mean() <= 1.6 * low
+    assert sizes.max() <= cand + low - 1
     for j in range(0, 10_000, 97):
         row = nb[j]
         assert j not in row
@@ -271,7 +275,7 @@ def test_beta_values():
 
 @pytest.mark.parametrize("params, message", [
     (dict(beta_min=2.5, beta_max=2.0), "method 'tc': beta_min (2.5) must be <= beta_max (2.0)"),
-    (dict(candidates=8), "method 'tc': candidates (8) must be >= min_neighbors (10)"),
+    (dict(candidates=8), "method 'tc': candidates (8) must be >= min_neighbors (24)"),
     (dict(beta_min=1.0, beta_max=9.0, beta_step=0.01), "more than 62 beta values"),
     (dict(candidates=0), "parameter 'candidates' must be >= 2"),
     (dict(beta_step=0), "parameter 'beta_step' must be >= 0.001"),

@@ -39,7 +39,7 @@ def test_an_upload_without_a_method_is_the_default_method(client):
     ({"method": "auto", "fit": "monge"},
      "params.fit: method 'auto' chooses its own fit; fit 'monge' needs a neighborhood method"),
     ({"method": "knn", "fit": "cubic"}, "params.fit: method 'knn': unknown fit 'cubic'; "
-                                        "choose one of ['implicit', 'monge', 'nfr']"),
+                                        "choose one of ['adaptive', 'implicit', 'monge', 'nfr']"),
     ({"method": "knn", "solver": "qr"}, "params.solver: method 'knn': parameter 'solver' "
                                         "must be one of ['taubin', 'algebraic'], got 'qr'"),
     ({"method": "egg", "orientation": "up"},

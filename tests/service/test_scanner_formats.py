@@ -21,7 +21,9 @@ from scanner_files import e57_file  # noqa: E402
 @pytest.fixture(scope="module")
 def e57_job(app_client, tmp_path_factory):
     path = tmp_path_factory.mktemp("e57") / "room.e57"
-    e57_file(path, scans=((0.2, -0.1, 0.3),), n=300, invalid_every=11)
+    # two scans, two poses: each sphere is seen from its own centre
+    e57_file(path, scans=((0.2, -0.1, 0.3), (3.0, 0.5, -0.2)), n=300, invalid_every=11,
+             rotations=[(1.0, 0.0, 0.0, 0.0), (np.cos(0.3), np.sin(0.3), 0.0, 0.0)])
     cloud = curvature.read(path)
     response = app_client.post("/v1/jobs", files={"file": ("room.e57", path.read_bytes())},
                                data={"params": json.dumps({"method": "knn", "k": 12})})
@@ -40,14 +42,20 @@ def test_e57_to_las_laz_ply_keeps_every_field(client, e57_job, fmt, tmp_path):
     back = curvature.io.read_result(path)
     np.testing.assert_allclose(back.points, cloud.points, atol=1e-6)
     np.testing.assert_array_equal(back.index, cloud.index)
-    for name in ("intensity", "scan"):
-        np.testing.assert_array_equal(back.attributes[name], cloud.properties[name])
-    scale = 1 if fmt == "ply" else 257  # LAS colours are 16-bit
-    np.testing.assert_array_equal(back.attributes["red"],
-                                  cloud.properties["red"].astype(np.int64) * scale)
-    assert np.isfinite(back.k1[back.status == 0]).all()
-    # the scanner sat inside the sphere: normals facing it point in, so H < 0 nearly everywhere
-    assert np.mean(back.mean[back.status == 0] < 0) > 0.99
+    assert set(cloud.properties) == {"intensity", "red", "green", "blue", "scan"}
+    for name, values in cloud.properties.items():
+        # LAS colours are 16-bit: 8-bit channels come back scaled by 257 (255 -> 65535)
+        scale = 257 if fmt != "ply" and name in ("red", "green", "blue") else 1
+        np.testing.assert_array_equal(back.attributes[name], values.astype(np.int64) * scale
+                                      if scale != 1 else values, err_msg=name)
+    local = curvature.estimate(cloud, "knn", k=12)
+    for name in ("k1", "k2", "mean", "gaussian", "residual", "normals", "dir1", "dir2",
+                 "status", "neighbor_count"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(local, name), err_msg=name)
+    # each scanner sat inside its sphere: normals facing it point in, so H < 0 on both scans
+    for scan in (0, 1):
+        ok = (back.status == 0) & (back.attributes["scan"] == scan)
+        assert np.mean(back.mean[ok] < 0) > 0.99, scan
 
 
 def test_las_is_offered_by_accept_header(client, e57_job):
