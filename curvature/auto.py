@@ -312,7 +312,7 @@ def plan_auto(points: np.ndarray, tree: tuple, noise_threshold: float,
     # noise and say little of either; over DENSE_K neighbors the patch is far wider than the
     # noise, the fit's residual is the noise and the patch's area gives the true spacing.
     indptr, indices, d2 = knn_csr(points, tree, sample, DENSE_K)
-    fit_batch(points, sample, indptr, indices, FIT_MONGE, SOLVER_TAUBIN, True, *outs)
+    fit_batch(points, sample, indptr, indices, FIT_MONGE, SOLVER_TAUBIN, True, 0.0, *outs)
     residual = outs[5][outs[6] == Status.OK]
     wide_spacing = float(np.median(np.sqrt(d2[:, -1]))) * np.sqrt(PLAN_K / DENSE_K)
     if not (residual.size and wide_spacing > 0.0):
