@@ -39,7 +39,7 @@ from numba import njit, prange
 from .kernels import MAX_FOOT_DIST, fit_monge, gather_local, principal_axes, spans_surface
 from .normal_field import nfr_anchor_fits_one, supported
 from .normal_quadric import N_QUAD, curvature_from_quadric, regress_normal_quadric
-from .quadric import OK, foot_point, quadric_value_grad, sampson_rms, shape_operator
+from .quadric import OK, foot_point, sampson_rms, shape_operator
 
 __all__ = ["CALIBRATION", "DEFAULT_GAMMA", "DEFAULT_KINDS", "DEFAULT_LADDER", "KIND_MONGE",
            "KIND_NORMAL_QUADRIC", "SIGMA_FLOOR", "ladder_estimates", "multiscale_anchor_fits",
@@ -66,9 +66,6 @@ SIGMA_GROWTH = 2.0
 SIGMA_FLOOR = 1e-7
 # A foot point farther than this many fit units from the anchor means the fit missed it.
 FOOT_LIMIT = 2.0
-# Monge rungs leave out points farther from their first fit than this many robust standard
-# deviations (1.4826 times the median distance) and fit again.
-ROBUST_CUT = 4.0
 
 
 @njit(cache=True)
@@ -105,23 +102,6 @@ def _monge_rung(points, field, p, nbr, quad):
     a, b, c, ok = fit_monge(xs, axes)
     if not ok:
         return 2, h, np.nan, np.nan, np.nan
-    # One robust step: points far beyond the fit's typical distance (an outlier one spacing
-    # off the surface that the outlier test let through) are left out and the fit is redone.
-    dist = np.empty(xs.shape[0])
-    for i in range(xs.shape[0]):
-        f, g = quadric_value_grad(a, b, c, xs[i])
-        dist[i] = abs(f) / max(np.sqrt(np.sum(g * g)), 1e-300)
-    cut = ROBUST_CUT * 1.4826 * np.median(dist[1:])
-    inside = dist <= cut
-    inside[0] = True  # the anchor itself
-    if cut > 0.0 and not inside.all() and inside.sum() >= 6:
-        xs = xs[inside]
-        w, axes = principal_axes(xs)
-        if not spans_surface(w):
-            return 2, h, np.nan, np.nan, np.nan
-        a, b, c, ok = fit_monge(xs, axes)
-        if not ok:
-            return 2, h, np.nan, np.nan, np.nan
     x0, found = foot_point(a, b, c, MAX_FOOT_DIST)
     if not found:
         return 3, h, np.nan, np.nan, np.nan
