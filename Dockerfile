@@ -30,17 +30,6 @@ RUN pip install ".[service,dask]" \
 # Out of /src from here on: there `python -m` would import the source copy, not the installed
 # package, and numba would file the kernels under the copy's path, which the runtime lacks.
 WORKDIR /
-# The wheels' shared libraries keep symbol tables the runtime never reads (about 70 MB).
-# strip is binutils', from the base image's package manager; where that cannot be reached the
-# libraries stay as they are. What loads and imports before and after must be the same.
-COPY scripts/extension_modules.py /tmp/
-RUN if apt-get update -qq && apt-get install -y -qq --no-install-recommends binutils \
-            >/dev/null; then \
-        python /tmp/extension_modules.py >/tmp/before.txt \
-        && find /opt/venv -name "*.so*" -type f -exec strip --strip-unneeded {} + \
-        && python /tmp/extension_modules.py | diff /tmp/before.txt - \
-        && echo "stripped; $(wc -l </tmp/before.txt) libraries and modules still load"; \
-    else echo "binutils not installable: the shared libraries are left unstripped"; fi
 # numba's cache and kernels.warm check each source's modification time; copying between stages
 # keeps whole seconds only, so the sources get a whole-second time before the warm-up.
 RUN find /opt/venv/lib -path "*/site-packages/curvature/*" -name "*.py" \

@@ -38,15 +38,3 @@ def test_the_warm_up_compiles_the_installed_package_not_the_source_copy():
     assert workdirs and workdirs[-1] == "/", workdirs
     after = build[build.index("python -m curvature.warmup"):]
     assert "cache_is_warm()" in after  # the build fails if the stamp was not written
-
-
-def test_stripping_the_libraries_is_checked_and_its_script_reaches_the_build():
-    build = TEXT.split("AS runtime", 1)[0]
-    strip = build.index("strip --strip-unneeded")
-    # the same list of loading libraries and importing modules before and after
-    assert build.count("python /tmp/extension_modules.py") == 2
-    assert build.index("extension_modules.py >/tmp/before.txt") < strip
-    assert "diff /tmp/before.txt -" in build[strip:]
-    ignore = (REPO / ".dockerignore").read_text().splitlines()
-    assert "scripts" in ignore and "!scripts/extension_modules.py" in ignore
-    assert ignore.index("!scripts/extension_modules.py") > ignore.index("scripts")
