@@ -27,11 +27,16 @@ RUN pip install ".[service,dask]" \
     && find /opt/venv/lib -depth -type d -path "*/site-packages/*" \
        \( -name tests -o -name test \) -exec rm -rf {} + \
     && (pip uninstall -y -q pip setuptools wheel 2>/dev/null || true)
+# Out of /src from here on: there `python -m` would import the source copy, not the installed
+# package, and numba would file the kernels under the copy's path, which the runtime lacks.
+WORKDIR /
 # numba's cache and kernels.warm check each source's modification time; copying between stages
 # keeps whole seconds only, so the sources get a whole-second time before the warm-up.
 RUN find /opt/venv/lib -path "*/site-packages/curvature/*" -name "*.py" \
         -exec touch -m -d @1700000000 {} + \
-    && python -m curvature.warmup -q && python -c "import service.app, distributed"
+    && python -m curvature.warmup -q \
+    && python -c "import curvature.warmup as w, service.app, distributed; \
+assert w.cache_is_warm() and w.PACKAGE.is_relative_to('/opt/venv'), w.PACKAGE"
 
 # --- runtime: the virtualenv and the compiled kernels, run as an unprivileged user ---------
 FROM ${BASE_IMAGE} AS runtime

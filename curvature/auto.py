@@ -64,14 +64,21 @@ from .params import ParamSpec
 from .sampling import cell_ijk, grid_keys, thinned
 from .status import Status
 
+# Neighbors of the spacing and noise measurements and of the clean-cloud fit.
+PLAN_K = 24
 AUTO_PARAMS = (
-    ParamSpec("k", int, 384, 48, 1024,
-              help="neighbors of the normal fits on noisy clouds, both passes (lowered on small "
-                   "clouds: max_share)"),
+    # k is the largest neighborhood; its floor is the smallest fit auto makes anyway (the
+    # clean-cloud fit and the first scale rung), so every k it accepts is honoured as given.
+    ParamSpec("k", int, 384, PLAN_K, 1024,
+              help="largest neighborhood of the curvature fits on noisy clouds, both passes: "
+                   "the fits over 24, 48, 96 and 192 neighbors below k compete with the one "
+                   "over k (scale_gamma); at least 24, the clean-cloud fit's size; lowered on "
+                   "small clouds (max_share)"),
     ParamSpec("normal_k", int, 48, 12, 256, help="neighbors of the stage-1 PCA normals"),
     ParamSpec("max_share", float, 0.04, 0.0, 1.0,
               help="largest share of the cloud's points one fit may use: on clouds of fewer "
-                   "than k / max_share points, k is lowered to max(48, max_share * points)"),
+                   "than k / max_share points, k is lowered to max(48, max_share * points), never "
+                   "above k"),
     ParamSpec("nfr_ratio", float, 0.7, 0.0, 1e6,
               help="the cubic normal field replaces the normal-constrained quadric at an anchor "
                    "where its normal misfit is below this fraction of the quadric's (0: quadric "
@@ -88,8 +95,6 @@ AUTO_PARAMS = (
               help="relative noise (RMS residual / spacing) below which a cloud counts as clean "
                    "and gets the implicit quadric over 24 neighbors"),
 )
-# Neighbors of the spacing and noise measurements and of the clean-cloud fit.
-PLAN_K = 24
 # The plan's subsample keeps one point per cell of this fraction of the bounding-box diagonal.
 PLAN_CELLS = 64
 # Anchor grid cell, in spacings (about 13 points a cell on a surface).

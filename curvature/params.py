@@ -57,10 +57,13 @@ class ParamSpec:
             raise ParameterError(f"{where} must be a whole number, got {value!r}")
         if self.kind is float and not (coerced == coerced and abs(coerced) != float("inf")):
             raise ParameterError(f"{where} must be finite, got {value!r}")
+        # A value out of a two-sided range is told the whole range, not just the bound it hit.
+        allowed = ("" if self.minimum is None or self.maximum is None
+                   else f"; allowed: {self.minimum} to {self.maximum}")
         if self.minimum is not None and coerced < self.minimum:
-            raise ParameterError(f"{where} must be >= {self.minimum}, got {value!r}")
+            raise ParameterError(f"{where} must be >= {self.minimum}, got {value!r}{allowed}")
         if self.maximum is not None and coerced > self.maximum:
-            raise ParameterError(f"{where} must be <= {self.maximum}, got {value!r}")
+            raise ParameterError(f"{where} must be <= {self.maximum}, got {value!r}{allowed}")
         return coerced
 
 

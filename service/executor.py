@@ -16,6 +16,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import signal
+import sqlite3
 import time
 import uuid
 from concurrent.futures import Future, ProcessPoolExecutor
@@ -49,6 +50,9 @@ def worker_crashed(runs: int) -> dict:
 
 # How long the processes of a broken pool are given to report how they ended.
 _EXIT_WAIT_SECONDS = 5.0
+# How long the watchdog's read of the running jobs waits for a locked store: not the store's
+# own 30 s, because the lock may be held by the very run the watchdog has to end.
+WATCH_BUSY_SECONDS = 1.0
 OUTCOME_LOST = ProblemError(
     "worker-crashed", "the outcome of this job could not be recorded, too many times "
     "(is the server's disk full?)").to_dict()
@@ -83,12 +87,14 @@ class _Pool:
 
 @dataclass(eq=False)
 class _InFlight:
-    """A job handed to the pool: its future, pool, run token and hand-over time."""
+    """A job handed to the pool: its future, pool, run token, hand-over time, and the start
+    of its run as last read from the store (None until the watchdog has seen it running)."""
 
     future: Future
     pool: _Pool
     token: str
     handed_at: float
+    started_at: float | None = None
 
 
 class LocalPoolExecutor:
@@ -360,17 +366,24 @@ class LocalPoolExecutor:
 
     async def watch(self) -> None:
         """End runs past their time limit; re-queue running jobs that no run here owns."""
-        rows = await anyio.to_thread.run_sync(self.store.running)
+        try:
+            rows = await anyio.to_thread.run_sync(self.store.running, WATCH_BUSY_SECONDS)
+        except sqlite3.OperationalError as exc:
+            # A worker stopped in the middle of a commit can leave the store unreadable until
+            # it is gone; the runs' start times read before still tell which one is overdue,
+            # so the kill that frees the store does not wait for the store.
+            log.warning("watchdog: the job store is locked (%s); time limits checked against "
+                        "the start times read before", exc)
+            await self._stop_overdue_runs(
+                (job_id, e.token, e.started_at) for job_id, e in list(self._in_flight.items()))
+            return
         # Read the in-flight table after the store: a job claimed before the query was
         # handed to the pool before it, so it is in the table unless its run has ended.
-        now = time.time()
-        limit = self.settings.job_time_limit_seconds + self.settings.time_limit_grace_seconds
         suspects: dict[str, str | None] = {}
         for job_id, token, started_at in rows:
             entry = self._in_flight.get(job_id)
             if entry is not None and entry.token == token:
-                if started_at is not None and now - started_at > limit:
-                    await self._stop_overdue(job_id, entry)
+                entry.started_at = started_at
                 continue
             if self._orphan_suspects.get(job_id, "") == token:
                 # Seen without a run twice in a row: its outcome was lost.
@@ -378,6 +391,17 @@ class LocalPoolExecutor:
             else:
                 suspects[job_id] = token
         self._orphan_suspects = suspects
+        await self._stop_overdue_runs(rows)
+
+    async def _stop_overdue_runs(self, runs) -> None:
+        """End the runs here, of ``(job id, run token, started_at)``, past limit + grace."""
+        limit = self.settings.job_time_limit_seconds + self.settings.time_limit_grace_seconds
+        now = time.time()
+        for job_id, token, started_at in list(runs):
+            entry = self._in_flight.get(job_id)
+            if (entry is not None and entry.token == token and started_at is not None
+                    and now - started_at > limit):
+                await self._stop_overdue(job_id, entry)
 
     async def _stop_overdue(self, job_id: str, entry: _InFlight) -> None:
         settings = self.settings

@@ -3,8 +3,8 @@
 The request models reject bad parameters before the library sees them; their messages
 ("Input should be greater than or equal to 5") name neither the method nor the bound's
 meaning. Where the parameter is one of the library's :class:`curvature.ParamSpec`, its own
-check gives the message (``method 'knn': parameter 'k' must be >= 5, got 0``), so the CLI,
-the library and the service say the same thing.
+check gives the message (``method 'knn': parameter 'k' must be >= 5, got 0; allowed: 5 to
+1024``), so the CLI, the library and the service say the same thing.
 """
 
 from __future__ import annotations

@@ -161,8 +161,8 @@ class JobStore:
         self.busy_timeout = busy_timeout
 
     @contextmanager
-    def _conn(self) -> Iterator[sqlite3.Connection]:
-        conn = connect(self.db_path, self.busy_timeout)
+    def _conn(self, busy_timeout: float | None = None) -> Iterator[sqlite3.Connection]:
+        conn = connect(self.db_path, self.busy_timeout if busy_timeout is None else busy_timeout)
         try:
             yield conn
         finally:
@@ -417,9 +417,11 @@ class JobStore:
                          "run_token = NULL WHERE id = ?", (QUEUED, attempts, job_id))
             return QUEUED
 
-    def running(self) -> list[tuple[str, str | None, float | None]]:
-        """``(id, run_token, started_at)`` of every running job."""
-        with self._conn() as conn:
+    def running(self, busy_timeout: float | None = None
+                ) -> list[tuple[str, str | None, float | None]]:
+        """``(id, run_token, started_at)`` of every running job; waits up to ``busy_timeout``
+        seconds (default: the store's) for a lock held elsewhere."""
+        with self._conn(busy_timeout) as conn:
             rows = conn.execute("SELECT id, run_token, started_at FROM jobs WHERE status = ?",
                                 (RUNNING,)).fetchall()
         return [(r[0], r[1], r[2]) for r in rows]

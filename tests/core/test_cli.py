@@ -92,7 +92,7 @@ def test_neighbors_prints_one_neighborhood(sphere_file, capsys):
     (["estimate", "SPHERE", "-o", "OUT", "--beta-min", "1.2"], "does not apply to method 'auto'"),
     (["estimate", "SPHERE", "-o", "OUT", "--method", "knn", "--beta-min", "1.2"],
      "does not apply to method 'knn'"),
-    (["estimate", "SPHERE", "-o", "OUT", "--k", "1"], "'k' must be >= 48"),
+    (["estimate", "SPHERE", "-o", "OUT", "--k", "1"], "'k' must be >= 24"),
     (["estimate", "SPHERE", "-o", "OUT", "--method", "knn", "--k", "1"], "'k' must be >= 5"),
     (["estimate", "SPHERE", "-o", "OUT", "--fit", "monge"], "method 'auto' chooses its own fit"),
     (["estimate", "SPHERE", "-o", "OUT", "--preset", "paper", "--method", "knn"],

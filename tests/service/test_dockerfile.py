@@ -27,3 +27,14 @@ def test_kernels_are_compiled_at_build_into_the_cache_the_runtime_reads():
     # numba only uses a cache folder it may write to: the service user's.
     assert f"--chown=10001:10001 {cache[0]} {cache[0]}" in runtime
     assert re.search(r"^USER curvature$", runtime, flags=re.M)
+
+
+def test_the_warm_up_compiles_the_installed_package_not_the_source_copy():
+    # python -m imports from the working directory first: run in /src, the warm-up would fill
+    # the cache for /src/curvature, which the runtime image does not have (it compiled again)
+    build = TEXT.split("AS runtime", 1)[0]
+    before = build[:build.index("python -m curvature.warmup")]
+    workdirs = re.findall(r"^WORKDIR (\S+)$", before, flags=re.M)
+    assert workdirs and workdirs[-1] == "/", workdirs
+    after = build[build.index("python -m curvature.warmup"):]
+    assert "cache_is_warm()" in after  # the build fails if the stamp was not written

@@ -201,6 +201,36 @@ def test_time_limit_kills_a_run_that_does_not_stop(client):
     assert wait_for_job(client, follow_up["id"])["status"] == "succeeded"
 
 
+def test_time_limit_ends_a_wedged_run_while_the_store_is_locked(client, monkeypatch):
+    """A worker stopped in the middle of a commit can leave the store unreadable until it is
+    gone; the watchdog must not wait for the store to end it (it would wait forever)."""
+    executor = client.app.state.executor
+    with changed_executor(client, job_time_limit_seconds=1.0, time_limit_grace_seconds=0.5):
+        job_id = npy_upload(client, 300_000).json()["id"]
+        wait_for_job(client, job_id, until=("running",))
+        deadline = time.monotonic() + 30
+        while getattr(executor._in_flight.get(job_id), "started_at", None) is None:
+            assert time.monotonic() < deadline, "the watchdog never read the run's start"
+            time.sleep(0.05)  # the watchdog reads the running jobs every 0.2 s
+        old = executor.worker_pids()
+        for pid in old:
+            os.kill(pid, signal.SIGSTOP)
+
+        def locked(*args, **kwargs):
+            raise sqlite3.OperationalError("database is locked")
+
+        monkeypatch.setattr(executor.store, "running", locked)
+        try:
+            job = wait_for_job(client, job_id, timeout=30)
+        finally:
+            for pid in old:
+                with contextlib.suppress(ProcessLookupError):
+                    os.kill(pid, signal.SIGCONT)
+    assert job["status"] == "failed", job
+    assert job["error"]["type"] == "/problems/time-limit"
+    assert not set(old) & set(executor.worker_pids())
+
+
 # -- expiry and cleanup ------------------------------------------------------------------------
 
 def add_job(store: JobStore, settings, status: str, ttl: float | None = None) -> str:

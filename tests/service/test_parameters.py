@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 import json
+import re
 
+import numpy as np
 import pytest
 from service_helpers import sphere, wait_for_job
 
 import curvature
 
 
-@pytest.mark.parametrize("params", [{}, {"k": 96}, {"orientation": "auto"}])
+@pytest.mark.parametrize("params", [{}, {"k": 24}, {"k": 96}, {"orientation": "auto"}])
 def test_params_without_a_method_are_the_default_methods(client, params):
     response = client.post("/v1/jobs", json={"points": sphere(200).tolist(), "params": params})
     assert response.status_code == 202, response.text
@@ -29,7 +31,10 @@ def test_an_upload_without_a_method_is_the_default_method(client):
 
 
 @pytest.mark.parametrize("params, detail", [
-    ({"k": 24}, "params.k: method 'auto': parameter 'k' must be >= 48, got 24"),
+    ({"k": 10}, "params.k: method 'auto': parameter 'k' must be >= 24, got 10; allowed: 24 to "
+                "1024"),
+    ({"k": 2000}, "params.k: method 'auto': parameter 'k' must be <= 1024, got 2000; allowed: "
+                  "24 to 1024"),
     ({"method": "knn", "k": 0}, "params.k: method 'knn': parameter 'k' must be >= 5, got 0"),
     ({"method": "knn", "k": 5.5},
      "params.k: method 'knn': parameter 'k' must be a whole number, got 5.5"),
@@ -64,3 +69,21 @@ def test_the_library_says_the_same_for_a_bound(client):
     response = client.post("/v1/curvature", json={"points": sphere(50).tolist(),
                                                   "params": {"method": "knn", "k": 0}})
     assert response.json()["detail"] == f"params.k: {raised.value}"
+
+
+def test_the_job_pages_placeholder_is_valid_for_every_method_with_that_parameter(client):
+    # what a user who types the hint as it stands gets: a job, not a 422
+    page = client.get("/ui").text
+    hint = json.loads(re.search(r"id=\"extra-params\"[^>]*placeholder='([^']*)'", page)[1])
+    methods = {m["name"]: {p["name"] for p in m["parameters"]}
+               for m in client.get("/v1/methods").json()["methods"]}
+    takers = [name for name, names in methods.items() if set(hint) <= names]
+    assert "auto" in takers and "knn" in takers, takers
+    # noisy, so that auto takes its noisy branch, the one k sizes
+    points = sphere(400) + np.random.default_rng(5).normal(scale=0.02, size=(400, 3))
+    for params in [hint] + [{"method": name, **hint} for name in takers]:
+        response = client.post("/v1/curvature", json={"points": points.tolist(),
+                                                      "params": params})
+        assert response.status_code == 200, (params, response.text)
+        # honoured as given: no fit uses more neighbors than k
+        assert max(response.json()["fields"]["neighbor_count"]) <= hint["k"], params
