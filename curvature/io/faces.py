@@ -69,8 +69,9 @@ def triangulate(source, counts, indices, n_vertices: int, *,
         first_bad = int(np.flatnonzero(bad)[0])
         row = int(np.searchsorted(np.cumsum(counts), first_bad, side="right"))
         raise FormatError(
-            source, f"{label} {first_row + row} refers to vertex {int(indices[first_bad])}, but there are "
-                    f"only {n_vertices} vertices (valid 0..{n_vertices - 1})", **where(row))
+            source, f"{label} {first_row + row} refers to vertex {int(indices[first_bad])}, "
+                    f"but there are only {n_vertices} vertices (valid 0..{n_vertices - 1})",
+            **where(row))
     starts = np.cumsum(counts) - counts
     tris_per = np.maximum(counts - 2, 0)
     if tris_per.sum() == 0:

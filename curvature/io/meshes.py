@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import itertools
 import re
 
 import numpy as np
@@ -12,23 +11,6 @@ from ..errors import FormatError, NonFiniteError, TooFewPointsError
 from .checks import finish_cloud
 from .faces import ragged_take, triangulate
 from .text_blocks import RowScanner, blank_comments, gather, parse_floats, rows_values
-from .tokens import decode_text, numbers, split_rows
-
-
-def _integers(tokens: list[str], source, line_of, what: str) -> np.ndarray:
-    """Tokens as int64; names the line of the first token that is not an integer."""
-    try:
-        return np.array(tokens, dtype=np.int64)
-    except (ValueError, OverflowError):
-        pass
-    for i, tok in enumerate(tokens):
-        try:
-            int(tok)
-        except ValueError:
-            raise FormatError(source, f"{what} {tok[:40]!r} is not an integer",
-                              line=line_of(i)) from None
-    raise FormatError(source, f"a {what} is out of range")  # pragma: no cover - defensive
-
 
 # --- OBJ -----------------------------------------------------------------------------------
 
@@ -198,9 +180,6 @@ def _obj_resolve(idx, base, source, line_of, what):
 # --- STL -----------------------------------------------------------------------------------
 
 _STL_RECORD = np.dtype([("normal", "<f4", (3,)), ("v", "<f4", (3, 3)), ("attr", "<u2")])
-_STL_PATTERN = np.array(["facet", "outer", "vertex", "vertex", "vertex", "endloop",
-                         "endfacet"])
-
 
 def read_stl(data: bytes, source=None) -> PointCloud:
     """Decode an STL file, ascii or binary (detected from the size and the ``solid`` word).
@@ -240,30 +219,73 @@ def _stl_binary(data, n, source):
     return corners, lambda c: {"offset": 84 + 50 * (c // 3) + 12 + 12 * (c % 3)}
 
 
+_STL_WORDS = ("facet", "outer", "vertex", "endloop", "endfacet", "solid", "endsolid")
+_STL_CODES = np.array([0, 1, 2, 2, 2, 3, 4])  # facet outer vertex x3 endloop endfacet
+_WORD_BYTES = 8
+
+
 def _stl_ascii(data, source):
-    text = decode_text(data, source)
-    numbered = [(i, ln) for i, ln in enumerate(text.splitlines(), start=1) if ln.strip()]
-    rows, _ = split_rows([ln for _, ln in numbered])
-    keep = [k for k, r in enumerate(rows) if r[0].lower() not in ("solid", "endsolid")]
-    keywords = np.array([rows[k][0].lower() for k in keep], dtype=str)
-    m = len(keep) // 7
-    expected = np.resize(_STL_PATTERN, len(keep))
-    wrong = np.flatnonzero(keywords != expected)
-    if wrong.size or len(keep) % 7:
-        at = int(wrong[0]) if wrong.size else len(keep)
-        if at < len(keep):
-            raise FormatError(source, f"expected '{expected[at]}' in ascii STL, found "
-                                      f"{rows[keep[at]][0][:40]!r}", line=numbered[keep[at]][0])
-        raise FormatError(source, "ascii STL ends inside a facet",
-                          line=numbered[-1][0] if numbered else 1)
-    vertex_rows = [keep[7 * f + j] for f in range(m) for j in (2, 3, 4)]
-    lines = [numbered[k][0] for k in vertex_rows]
-    bad = [i for i, k in enumerate(vertex_rows) if len(rows[k]) != 4]
-    if bad:
-        raise FormatError(source, "a 'vertex' line needs 3 numbers", line=lines[bad[0]])
-    corners = numbers([rows[k][1:] for k in vertex_rows], source,
-                      lambda i: lines[int(i)]).reshape(-1, 3)
-    return corners, lambda c: {"line": lines[int(c)]}
+    """Corners of an ascii STL, a block of lines at a time; keywords compared with numpy."""
+    scanner = RowScanner(data, 0, 1, source)
+    words = np.zeros((len(_STL_WORDS), _WORD_BYTES), dtype=np.uint8)
+    for i, w in enumerate(_STL_WORDS):
+        words[i, :len(w)] = np.frombuffer(w.encode(), dtype=np.uint8)
+    corners, phase = [], 0
+    for block in scanner.blocks():
+        tok, raw = block.tokens, np.frombuffer(block.buf, dtype=np.uint8)
+        first = tok.first()[block.rows]
+        code = _keyword_codes(raw, tok.starts[first], tok.ends[first], words)
+        keep = code < 5  # solid / endsolid lines frame the facets
+        lines, first, code = block.rows[keep], first[keep], code[keep]
+        expected = _STL_CODES[(phase + np.arange(code.size)) % 7]
+        wrong = np.flatnonzero(code != expected)
+        if wrong.size:
+            at = int(wrong[0])
+            shown = bytes(raw[tok.starts[first[at]]:tok.ends[first[at]]][:40]).decode("latin-1")
+            raise FormatError(source, f"expected '{_STL_WORDS[expected[at]]}' in ascii STL, "
+                                      f"found {shown!r}", line=block.first_line + int(lines[at]))
+        is_vertex = code == 2
+        v_lines, v_first = lines[is_vertex], first[is_vertex]
+        bad = np.flatnonzero(tok.lens[v_lines] != 4)
+        if bad.size:
+            raise FormatError(source, "a 'vertex' line needs 3 numbers",
+                              line=block.first_line + int(v_lines[bad[0]]))
+        text = gather(block.buf, tok.starts[v_first + 1], tok.ends[v_first + 3])
+        corners.append(parse_floats(text, 3 * v_lines.size, source,
+                                    lambda i, b=block, v=v_lines: b.first_line + int(v[i])
+                                    ).reshape(-1, 3))
+        phase = (phase + code.size) % 7
+    if phase:
+        raise FormatError(source, "ascii STL ends inside a facet", line=scanner.end_line)
+    corners = np.concatenate(corners) if corners else np.zeros((0, 3))
+    return corners, lambda c: {"line": _stl_corner_line(scanner, int(c), words)}
+
+
+def _keyword_codes(raw, starts, ends, words) -> np.ndarray:
+    """Index in ``_STL_WORDS`` of each token ``raw[starts:ends]`` (lower-cased), or
+    ``len(_STL_WORDS)`` for any other word."""
+    length = ends - starts
+    k = np.arange(_WORD_BYTES)
+    at = np.minimum(starts[:, None] + k, raw.size - 1)
+    chars = np.where(k < length[:, None], raw[at], 0).astype(np.uint8)
+    chars = np.where((chars >= 65) & (chars <= 90), chars + 32, chars).astype(np.uint8)
+    match = (chars[:, None, :] == words[None, :, :]).all(axis=2) & (length <= _WORD_BYTES
+                                                                     )[:, None]
+    return np.where(match.any(axis=1), match.argmax(axis=1), len(_STL_WORDS))
+
+
+def _stl_corner_line(scanner, corner: int, words) -> int:
+    """File line of the ``corner``-th 'vertex' line (for error messages)."""
+    seen = 0
+    for block in scanner.blocks():
+        tok, raw = block.tokens, np.frombuffer(block.buf, dtype=np.uint8)
+        first = tok.first()[block.rows]
+        v_lines = block.rows[_keyword_codes(raw, tok.starts[first], tok.ends[first],
+                                            words) == 2]
+        if corner < seen + v_lines.size:
+            return block.first_line + int(v_lines[corner - seen])
+        seen += v_lines.size
+    raise IndexError(corner)  # pragma: no cover - callers pass corners that exist
 
 
 def _merge_corners(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

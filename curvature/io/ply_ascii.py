@@ -1,13 +1,13 @@
-"""ASCII PLY bodies: one row per line, decoded a whole element at a time."""
+"""ASCII PLY bodies: one row per line, decoded a block of rows at a time."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from ..errors import FormatError
+from . import text_blocks
 from .faces import ragged_take
 from .ply_header import Element, ElementData, Header
-from . import text_blocks
 from .text_blocks import line_blocks
 from .tokens import block_numbers
 

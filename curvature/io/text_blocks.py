@@ -17,7 +17,7 @@ import numpy as np
 
 from ..errors import FormatError
 
-BLOCK_BYTES = 1 << 20
+BLOCK_BYTES = 1 << 18
 # No row of a point, vertex or face needs more; a longer line is refused rather than let one
 # line make a block (and its scratch arrays) as large as the file.
 MAX_LINE_BYTES = 1 << 20
