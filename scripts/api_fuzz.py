@@ -54,8 +54,9 @@ DOCUMENTED: tuple[tuple[str, str, str], ...] = (
     ("ST202", r'"type":"/problems/too-costly"',
      "a synchronous request whose estimated work exceeds CURVATURE_SYNC_MAX_COST (depends "
      "on the point count times the parameters)"),
-    ("ST201", r"Invalid component:\s*\n(\s*- (query: violates `additionalProperties`|header: "
-              r"violates `required` \(was Authorization\))\s*\n)+\s*\n",
+    ("ST201", r"Invalid component:[ \t]*\n([ \t]*- (query: violates `additionalProperties`|"
+              r"header: violates `required` \(was Authorization\))[ \t]*(\n|\Z))+"
+              r"([ \t]*\n|Content-Type:|\Z)",
      "unknown query parameters are ignored (as most HTTP APIs do, so clients can add "
      "cache busters or newer parameters); a case that drops the Authorization header gets it "
      "back from the harness, which sends the key with every request (the ignored_auth check "
