@@ -259,7 +259,7 @@ def _compressed_columns(data, h: PCDHeader, source):
 
 
 def _to_cloud(columns, h: PCDHeader, source) -> PointCloud:
-    points = np.concatenate([columns[a] for a in "xyz"], axis=1).astype(np.float64)
+    points = np.concatenate([columns[a] for a in "xyz"], axis=1, dtype=np.float64)
     keep = np.isfinite(points).all(axis=1)
     dropped = int(keep.size - np.count_nonzero(keep))
     if dropped:

@@ -67,7 +67,11 @@ def _read_element(data: bytes, at: int, element: Element, source, first_line: in
                   ) -> tuple[ElementData, int]:
     """The ``element.count`` rows from offset ``at``, a block at a time, and the offset
     after them."""
-    parts, done = [], 0
+    scalars = {p.name: np.empty(element.count, dtype=p.dtype) for p in element.properties
+               if not p.is_list}  # filled block by block: no second copy
+    lists: dict[str, tuple[list, list]] = {p.name: ([], []) for p in element.properties
+                                            if p.is_list}
+    done = 0
     for lo, hi, line in line_blocks(data, at, first_line=first_line, source=source):
         if done == element.count:
             break
@@ -78,22 +82,23 @@ def _read_element(data: bytes, at: int, element: Element, source, first_line: in
         ends = ends[:element.count - done]
         lens, flat = block_numbers(block[:int(ends[-1])] if ends.size else b"", ends, source,
                                    line)
-        parts.append(_decode(element, lens, flat, source, line, done))
+        part = _decode(element, lens, flat, source, line, done)
+        for name, values in part.scalars.items():
+            scalars[name][done:done + ends.size] = values
+        for name, (counts, items) in part.lists.items():
+            lists[name][0].append(counts)
+            lists[name][1].append(items)
         done += ends.size
         at = lo + (int(ends[-1]) + 1 if ends.size else 0)
-    scalars = {name: _join([p.scalars[name] for p in parts]) for name in
-               (parts[0].scalars if parts else {})}
-    lists = {name: (_join([p.lists[name][0] for p in parts]),
-                    _join([p.lists[name][1] for p in parts]))
-             for name in (parts[0].lists if parts else {})}
-    if not parts:  # an element with no rows
-        empty = _decode(element, np.zeros(0, np.int64), np.zeros(0), source, first_line)
-        scalars, lists = empty.scalars, empty.lists
+    empty = _decode(element, np.zeros(0, np.int64), np.zeros(0), source, first_line)
+    joined = {name: (_join(c) if c else empty.lists[name][0],
+                     _join(i) if i else empty.lists[name][1])
+              for name, (c, i) in lists.items()}
 
     def where(row: int) -> dict:
         return {"line": first_line + int(row)}
 
-    return ElementData(scalars, lists, where), min(at, len(data))
+    return ElementData(scalars, joined, where), min(at, len(data))
 
 
 def _join(arrays: list[np.ndarray]) -> np.ndarray:
