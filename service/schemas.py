@@ -54,19 +54,18 @@ def _annotation(spec: ParamSpec) -> Any:
         return Literal[tuple(spec.choices)]
     if spec.kind is bool:
         return Annotated[bool, Strict()]  # true or false only, not 1 or "yes"
-    if spec.kind in (int, float):
-        return Annotated[spec.kind, BeforeValidator(_not_bool)]
-    return spec.kind
-
-
-def _field(spec: ParamSpec, default: Any) -> Any:
-    bounds = {}
-    if spec.kind in (int, float):
+    if spec.kind in (int, float):  # bounds on the number itself, so '| None' keeps them
+        bounds = {}
         if spec.minimum is not None:
             bounds["ge"] = spec.minimum
         if spec.maximum is not None:
             bounds["le"] = spec.maximum
-    return Field(default, description=spec.help or None, **bounds)
+        return Annotated[spec.kind, Field(**bounds), BeforeValidator(_not_bool)]
+    return spec.kind
+
+
+def _field(spec: ParamSpec, default: Any) -> Any:
+    return Field(default, description=spec.help or None)
 
 
 def _viewpoint_rule(schema: dict) -> None:
