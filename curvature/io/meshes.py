@@ -215,7 +215,7 @@ def _stl_binary(data, n, source):
         raise FormatError(source, f"header says {n} triangles ({need} bytes) but the file has "
                                   f"{len(data)} bytes", offset=len(data))
     rec = np.frombuffer(data, dtype=_STL_RECORD, count=n, offset=84)
-    corners = rec["v"].reshape(-1, 3).astype(np.float64)
+    corners = rec["v"].reshape(-1, 3)  # float32 as stored: merged before widening
     return corners, lambda c: {"offset": 84 + 50 * (c // 3) + 12 + 12 * (c % 3)}
 
 
@@ -290,13 +290,14 @@ def _stl_corner_line(scanner, corner: int, words) -> int:
 
 def _merge_corners(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Unique vertices in first-appearance order, and triangles indexing them."""
-    pts = np.ascontiguousarray(corners + 0.0)  # + 0.0 turns -0.0 into 0.0: same vertex
+    pts = np.ascontiguousarray(corners + corners.dtype.type(0))  # -0.0 -> 0.0: same vertex
     keys = pts.view(np.dtype((np.void, pts.dtype.itemsize * 3))).reshape(-1)
     _, first, inverse = np.unique(keys, return_index=True, return_inverse=True)
     order = np.argsort(first, kind="stable")
     rank = np.empty_like(order)
     rank[order] = np.arange(order.size)
-    return pts[first[order]], rank[inverse.reshape(-1)].reshape(-1, 3).astype(np.int64)
+    return (pts[first[order]].astype(np.float64),
+            rank[inverse.reshape(-1)].reshape(-1, 3).astype(np.int64))
 
 
 # --- OFF -----------------------------------------------------------------------------------
