@@ -14,8 +14,10 @@ and without faces for the mesh formats. Each file is then loaded in a fresh proc
 
 - ``traced``: the peak of Python's allocations during the load (``tracemalloc``; numpy's
   buffers are traced), including the file's bytes read into memory;
-- ``rss``: the growth of the process's peak resident set (``VmHWM``, reset through
-  ``/proc/self/clear_refs`` just before) over its size just before (Linux only).
+- ``rss``: in another fresh process without tracing (tracemalloc's own records would
+  count for millions of small Python objects), the growth of the peak resident set
+  (``VmHWM``, reset through ``/proc/self/clear_refs`` just before) over its size then
+  (Linux only).
 
 The largest of these over every format is the bound ``docs/reliability.md`` reports.
 """
@@ -36,27 +38,27 @@ REPO = Path(__file__).resolve().parents[1]
 _MEASURE = r"""
 import json, sys, tracemalloc
 from pathlib import Path
-kind, path = sys.argv[1], Path(sys.argv[2])
+mode, kind, path = sys.argv[1], sys.argv[2], Path(sys.argv[3])
 import numpy as np, curvature
 from service import inputs, uploads
-body = path.read_bytes() if kind == "json" else None  # a JSON body is in memory anyway
 def status(key):
     for line in Path("/proc/self/status").read_text().splitlines():
         if line.startswith(key + ":"):
             return int(line.split()[1]) * 1024
+body = path.read_bytes() if kind == "json" else None  # a JSON body is in memory anyway
 Path("/proc/self/clear_refs").write_text("5")  # the peak resident set starts again here
 rss0 = status("VmRSS")
-tracemalloc.start()
+if mode == "traced":
+    tracemalloc.start()
 if kind == "json":
     uploads._decode_cloud(body, path.parent, max_points=100_000_000)
 else:
     cloud = inputs.load_input(path, "file", path.name, 100_000_000)
     inputs.check_cloud(cloud)
-traced = tracemalloc.get_traced_memory()[1]
-tracemalloc.stop()
-rss = status("VmHWM") - rss0
-print(json.dumps({"traced": traced, "rss": rss, "points": len(cloud.points)
-                  if kind != "json" else None}))
+if mode == "traced":
+    print(json.dumps({"traced": tracemalloc.get_traced_memory()[1]}))
+else:
+    print(json.dumps({"rss": status("VmHWM") - rss0}))
 """
 
 
@@ -142,23 +144,26 @@ def write_files(folder: Path, n: int, content: str) -> dict[str, Path]:
     return out
 
 
-def measure(n: int) -> list[dict]:
+def measure(n: int, only: set[str] | None = None) -> list[dict]:
     """One row per (content, file): bytes, traced and RSS peaks per input byte."""
     rows = []
     for content in ("typical", "dense"):
         with tempfile.TemporaryDirectory(prefix="curvature-mem-") as tmp:
             for name, path in write_files(Path(tmp), n, content).items():
+                if only and name not in only:
+                    continue
                 kind = "json" if name.endswith(".json") else "file"
-                out = subprocess.run([sys.executable, "-c", _MEASURE, kind, str(path)],
-                                     cwd=REPO, capture_output=True, text=True, timeout=900)
                 row = {"content": content, "file": name, "file_bytes": path.stat().st_size}
-                if out.returncode != 0:
-                    row["error"] = out.stderr.strip()[-300:]
-                else:
-                    got = json.loads(out.stdout.strip().splitlines()[-1])
-                    row.update(traced=got["traced"], rss=got["rss"],
-                               traced_per_byte=round(got["traced"] / row["file_bytes"], 2),
-                               rss_per_byte=round(got["rss"] / row["file_bytes"], 2))
+                for mode in ("traced", "rss"):  # apart: tracing inflates the resident set
+                    out = subprocess.run([sys.executable, "-c", _MEASURE, mode, kind,
+                                          str(path)], cwd=REPO, capture_output=True, text=True,
+                                         timeout=900)
+                    if out.returncode != 0:
+                        row["error"] = out.stderr.strip()[-300:]
+                        break
+                    got = json.loads(out.stdout.strip().splitlines()[-1])[mode]
+                    row[mode] = got
+                    row[f"{mode}_per_byte"] = round(got / row["file_bytes"], 2)
                 rows.append(row)
                 print(_line(row), flush=True)
     return rows
@@ -176,8 +181,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--points", type=int, default=1_000_000)
     parser.add_argument("--json", type=Path, help="also write the rows here")
+    parser.add_argument("--only", nargs="+", help="file names to measure (cloud.xyz ...)")
     args = parser.parse_args(argv)
-    rows = measure(args.points)
+    rows = measure(args.points, set(args.only or ()))
     ok = [r for r in rows if "error" not in r]
     for key in ("traced_per_byte", "rss_per_byte"):
         worst = max(ok, key=lambda r: r[key])
