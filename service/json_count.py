@@ -17,7 +17,9 @@ import numpy as np
 CHUNK_BYTES = 1 << 18
 _QUOTE, _BACKSLASH = ord('"'), ord("\\")
 _OPEN_LIST, _CLOSE_LIST, _OPEN_OBJ, _CLOSE_OBJ = ord("["), ord("]"), ord("{"), ord("}")
-_NOT_NUMBER = np.frombuffer(b"tfrsaNIiy", dtype=np.uint8)  # no digit, e, E, or n-u-l-l
+# 'r' occurs in true and 's' in false, but in no number, null, NaN or Infinity (those are
+# numbers to the parser and reported as non-finite coordinates later).
+_NOT_NUMBER = np.frombuffer(b"rs", dtype=np.uint8)
 
 
 def _key_before(body: bytes, pos: int) -> str:
@@ -42,8 +44,8 @@ def member_rows(body: bytes, chunk: int = CHUNK_BYTES) -> dict[str, int]:
 
 def scan_members(body: bytes, chunk: int = CHUNK_BYTES) -> tuple[dict[str, int], set[str]]:
     """:func:`member_rows`, and the top-level array members holding anything but numbers
-    and ``null`` (``true``, ``false``, ``NaN``, strings), which numpy would turn into
-    numbers without a word (``false`` -> 0.0, ``"1"`` -> 1.0)."""
+    and ``null`` (``true``, ``false``, strings), which numpy would turn into numbers without
+    a word (``false`` -> 0.0, ``"1"`` -> 1.0)."""
     counts: dict[str, int] = {}
     texty: set[str] = set()
     depth, in_string, escaped = 0, False, False
@@ -68,7 +70,7 @@ def scan_members(body: bytes, chunk: int = CHUNK_BYTES) -> tuple[dict[str, int],
         rows = np.flatnonzero(opens_list & (level == 3))
         starts = np.flatnonzero(opens_list & (level == 2))
         ends = np.flatnonzero(closes & (level == 1))
-        # Inside an array member: a quote, or a letter of true/false/NaN/Infinity.
+        # Inside an array member: a quote, or a letter of true or false.
         odd = np.flatnonzero((level >= 2) & (quote | (structural & np.isin(a, _NOT_NUMBER))))
         # Walk the few member boundaries; rows between two of them belong to `current`.
         events = sorted([(int(p), 1) for p in starts] + [(int(p), 0) for p in ends])

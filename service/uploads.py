@@ -332,12 +332,15 @@ def _decode_cloud(body: bytes, folder: Path, max_points: int | None = None) -> t
     for name in ("points", "normals", "faces"):
         if name in texty and doc.get(name) is not None:
             raise HTTPProblem("invalid-cloud", f"{name}: expected numbers (or null), found "
-                              "true, false, NaN, Infinity or a string")
+                              "true, false or a string")
     params = parse_params(doc.get("params"))
     # JSON null becomes NaN here, so it is reported as a non-finite coordinate.
     points = _as_array(doc["points"], "points", np.float64)
     normals = None if doc.get("normals") is None else _as_array(doc["normals"], "normals",
                                                                 np.float64)
+    if params.get("orientation") == "normals" and normals is None:  # as the schema says
+        raise HTTPProblem("invalid-parameters", "orientation 'normals' needs per-point "
+                          "normals: send 'normals' with the points")
     if normals is not None and not np.isfinite(normals).all():  # null, as the schema says
         row = int(np.flatnonzero(~np.isfinite(normals).all(axis=1))[0])
         raise HTTPProblem("invalid-cloud", f"normals: row {row} is not three finite numbers")
