@@ -59,6 +59,7 @@ def kill_cycles(cycles: int, seed: int = 0) -> dict:
     port = free_port()
     headers = {"Authorization": f"Bearer {key}"}
     accepted: list[str] = []
+    refused: dict[int, int] = {}  # submissions not accepted, by status
     started = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="curvature-soak-") as tmp, \
             open(Path(tmp) / "server.log", "wb") as log:
@@ -73,12 +74,16 @@ def kill_cycles(cycles: int, seed: int = 0) -> dict:
                         r = client.post("/v1/jobs", json=body)
                         if r.status_code == 202:
                             accepted.append(r.json()["id"])
+                        else:
+                            refused[r.status_code] = refused.get(r.status_code, 0) + 1
                     buffer = io.BytesIO()
                     np.save(buffer, np.random.default_rng(cycle).normal(size=(200_000, 3)))
                     r = client.post("/v1/jobs", files={"file": ("c.npy", buffer.getvalue())},
                                     data={"params": json.dumps({"method": "knn", "k": 10})})
                     if r.status_code == 202:
                         accepted.append(r.json()["id"])
+                    else:
+                        refused[r.status_code] = refused.get(r.status_code, 0) + 1
                 time.sleep(rng.uniform(0.5, 3.0))
                 os.killpg(server.pid, signal.SIGKILL)
                 server.wait()
@@ -106,7 +111,8 @@ def kill_cycles(cycles: int, seed: int = 0) -> dict:
         finally:
             server.send_signal(signal.SIGTERM)
             server.wait(timeout=30)
-    return {"cycles": cycles, "accepted": len(accepted), "outcomes": outcomes,
+    return {"cycles": cycles, "accepted": len(accepted), "refused": refused,
+            "outcomes": outcomes,
             "max_restarts_of_a_job": restarts, "max_attempts_of_a_job": attempts,
             "seconds": round(time.perf_counter() - started, 1)}
 
@@ -122,7 +128,8 @@ def main(argv: list[str] | None = None) -> int:
         report["kill"] = kill_cycles(args.cycles, args.seed)
         k = report["kill"]
         print(f"{k['cycles']} kill -9 cycles in {k['seconds']} s: {k['accepted']} jobs "
-              f"accepted, outcomes {k['outcomes']}, at most {k['max_restarts_of_a_job']} "
+              f"accepted (refused by status: {k['refused']}), outcomes {k['outcomes']}, "
+              f"at most {k['max_restarts_of_a_job']} "
               f"restart(s) and {k['max_attempts_of_a_job']} attempt(s) for one job")
     if args.json:
         args.json.write_text(json.dumps(report, indent=2) + "\n", encoding="utf-8")
