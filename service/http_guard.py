@@ -64,13 +64,13 @@ def guarded_protocol(header_timeout: float, max_header_bytes: int,
                 self._wait_for_headers()  # the first bytes of a next request
             if self._timer is not None:
                 self._header_bytes += len(data)
-                if self._header_bytes > max_header_bytes:
-                    STATS["headers_too_large"] += 1
-                    self._refuse(431, "request-headers-too-large",
-                                 f"the request line and headers exceed {max_header_bytes} "
-                                 "bytes")
-                    return
             super().data_received(data)
+            # Still inside the headers after this chunk (a chunk that completes them may
+            # carry body bytes too: those are not counted against the header limit).
+            if self._timer is not None and self._header_bytes > max_header_bytes:
+                STATS["headers_too_large"] += 1
+                self._refuse(431, "request-headers-too-large",
+                             f"the request line and headers exceed {max_header_bytes} bytes")
 
         def on_headers_complete(self) -> None:
             self._headers_done()

@@ -101,6 +101,19 @@ def test_oversized_headers_get_431_and_keep_alive_requests_still_work(server):
             time.sleep(0.2)
 
 
+def test_headers_and_a_large_body_in_one_write_are_not_taken_for_big_headers(server):
+    points = [[i * 1e-3, (i % 97) * 1e-2, 1.0 + (i % 13) * 1e-3] for i in range(6000)]
+    body = json.dumps({"points": points}).encode()
+    assert len(body) > 2 * (64 << 10)
+    head = (f"POST /v1/jobs HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {KEY_A}\r\n"
+            "Content-Type: application/json\r\nConnection: close\r\n"
+            f"Content-Length: {len(body)}\r\n\r\n").encode()
+    with socket.create_connection(("127.0.0.1", server.port)) as sock:
+        sock.sendall(head + body)
+        raw = _answer(sock, 30.0)
+    assert raw.startswith(b"HTTP/1.1 202"), raw[:300]
+
+
 def test_a_slow_but_steady_client_within_the_timeout_is_served(server):
     with socket.create_connection(("127.0.0.1", server.port)) as sock:
         for part in (b"GET /healthz HTTP/1.1\r\n", b"Host: x\r\n", b"Connection: close\r\n",
