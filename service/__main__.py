@@ -73,11 +73,21 @@ def main() -> None:
     import uvicorn
 
     from .app import create_app
+    from .http_guard import guarded_protocol
+    from .upload_gate import FD_HEADROOM, raise_fd_limit
 
     app = create_app(settings)
     app.state.data_lock = lock
     # One server process per data dir (the lock above): the store's queue is not shared.
-    server = uvicorn.Server(uvicorn.Config(app, log_level=settings.log_level, workers=1))
+    # Not limit_concurrency: it counts stalled connections too, and would refuse everyone.
+    # Stalled connections hold a descriptor each: keep them to a quarter of what is left
+    # after the headroom the upload gate keeps for the store and the pool.
+    fd_share = max(16, (raise_fd_limit() - FD_HEADROOM) // 4)
+    protocol = guarded_protocol(settings.header_timeout_seconds, settings.max_header_bytes,
+                                min(settings.max_pending_connections, fd_share))
+    server = uvicorn.Server(uvicorn.Config(
+        app, log_level=settings.log_level, workers=1, http=protocol,
+        timeout_keep_alive=settings.keep_alive_timeout_seconds))
     server.run(sockets=[sock])
     if not server.started:
         sys.exit(EXIT_STARTUP)

@@ -17,6 +17,9 @@ import numpy as np
 CHUNK_BYTES = 1 << 18
 _QUOTE, _BACKSLASH = ord('"'), ord("\\")
 _OPEN_LIST, _CLOSE_LIST, _OPEN_OBJ, _CLOSE_OBJ = ord("["), ord("]"), ord("{"), ord("}")
+# 'r' occurs in true and 's' in false, but in no number, null, NaN or Infinity (those are
+# numbers to the parser and reported as non-finite coordinates later).
+_NOT_NUMBER = np.frombuffer(b"rs", dtype=np.uint8)
 
 
 def _key_before(body: bytes, pos: int) -> str:
@@ -36,7 +39,15 @@ def member_rows(body: bytes, chunk: int = CHUNK_BYTES) -> dict[str, int]:
     chunk : int
         Bytes scanned at a time (bounds the scan's memory).
     """
+    return scan_members(body, chunk)[0]
+
+
+def scan_members(body: bytes, chunk: int = CHUNK_BYTES) -> tuple[dict[str, int], set[str]]:
+    """:func:`member_rows`, and the top-level array members holding anything but numbers
+    and ``null`` (``true``, ``false``, strings), which numpy would turn into numbers without
+    a word (``false`` -> 0.0, ``"1"`` -> 1.0)."""
     counts: dict[str, int] = {}
+    texty: set[str] = set()
     depth, in_string, escaped = 0, False, False
     current: str | None = None
     for offset in range(0, len(body), chunk):
@@ -59,6 +70,8 @@ def member_rows(body: bytes, chunk: int = CHUNK_BYTES) -> dict[str, int]:
         rows = np.flatnonzero(opens_list & (level == 3))
         starts = np.flatnonzero(opens_list & (level == 2))
         ends = np.flatnonzero(closes & (level == 1))
+        # Inside an array member: a quote, or a letter of true or false.
+        odd = np.flatnonzero((level >= 2) & (quote | (structural & np.isin(a, _NOT_NUMBER))))
         # Walk the few member boundaries; rows between two of them belong to `current`.
         events = sorted([(int(p), 1) for p in starts] + [(int(p), 0) for p in ends])
         last = 0
@@ -66,10 +79,12 @@ def member_rows(body: bytes, chunk: int = CHUNK_BYTES) -> dict[str, int]:
             if current is not None:
                 inside = np.searchsorted(rows, position) - np.searchsorted(rows, last)
                 counts[current] = counts.get(current, 0) + int(inside)
+                if np.searchsorted(odd, position) > np.searchsorted(odd, last):
+                    texty.add(current)
             if is_start == 1:
                 current = _key_before(body, offset + position)
                 counts.setdefault(current, 0)
             elif is_start == 0:
                 current = None
             last = position
-    return counts
+    return counts, texty

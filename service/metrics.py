@@ -105,12 +105,21 @@ class ServiceMetrics:
         self.pool_busy = Metric("curvature_pool_jobs_in_flight", "gauge",
                                 "Jobs handed to the pool and not yet finished.")
         self.ready = Metric("curvature_ready", "gauge", "1 when the service accepts work.")
+        self.connections_closed = Metric(
+            "curvature_connections_closed_total", "counter", "Connections closed before their "
+            "request headers were complete, by reason (header_timeouts, headers_too_large, "
+            "evicted).")
 
     def render(self) -> str:
+        from .http_guard import STATS
+
+        for reason, count in STATS.items():
+            self.connections_closed.set(count, reason=reason)
         families = [self.requests, self.request_seconds, self.jobs_submitted, self.jobs_finished,
                     self.job_seconds, self.upload_bytes, self.sync_requests, self.sync_stopped,
                     self.problems,
-                    self.jobs, self.pool_workers, self.pool_busy, self.ready]
+                    self.jobs, self.pool_workers, self.pool_busy, self.ready,
+                    self.connections_closed]
         lines: list[str] = []
         for family in families:
             lines += family.render()

@@ -78,8 +78,11 @@ _TYPES = [
                 "This API key has too many uploads in progress at once; retry after "
                 "Retry-After seconds."),
     ProblemType("request-timeout", 408, "Request timeout",
-                "The request body arrived too slowly (a read timeout or the minimum upload "
-                "rate); send it again on a faster connection."),
+                "The request headers or body arrived too slowly (a read timeout or the "
+                "minimum upload rate); send it again on a faster connection."),
+    ProblemType("request-headers-too-large", 431, "Request header fields too large",
+                "The request line and headers together exceed the server's limit "
+                "(CURVATURE_MAX_HEADER_BYTES)."),
     ProblemType("queue-full", 503, "Queue full",
                 "Too many unfinished jobs or waiting requests; retry after Retry-After seconds."),
     ProblemType("store-busy", 503, "Job store busy",

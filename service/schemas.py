@@ -19,6 +19,7 @@ from pydantic import (
     BeforeValidator,
     ConfigDict,
     Field,
+    Strict,
     create_model,
     field_validator,
     model_validator,
@@ -38,31 +39,53 @@ FIT_PARAMS: tuple[ParamSpec, ...] = tuple(curvature.FIT_PARAMS)
 FIT_ONLY: dict[str, tuple[str, ...]] = dict(curvature.fitting.FIT_ONLY)
 
 
+def _not_bool(value: Any) -> Any:
+    """JSON ``true``/``false`` is not a number (pydantic's lax mode would read 1 and 0)."""
+    if isinstance(value, bool):
+        raise ValueError("expected a number, not true or false")
+    return value
+
+
+Number = Annotated[float, BeforeValidator(_not_bool)]
+
+
 def _annotation(spec: ParamSpec) -> Any:
     if spec.choices:
         return Literal[tuple(spec.choices)]
-    return spec.kind
-
-
-def _field(spec: ParamSpec, default: Any) -> Any:
-    bounds = {}
-    if spec.kind in (int, float):
+    if spec.kind is bool:
+        return Annotated[bool, Strict()]  # true or false only, not 1 or "yes"
+    if spec.kind in (int, float):  # bounds on the number itself, so '| None' keeps them
+        bounds = {}
         if spec.minimum is not None:
             bounds["ge"] = spec.minimum
         if spec.maximum is not None:
             bounds["le"] = spec.maximum
-    return Field(default, description=spec.help or None, **bounds)
+        return Annotated[spec.kind, Field(**bounds), BeforeValidator(_not_bool)]
+    return spec.kind
+
+
+def _field(spec: ParamSpec, default: Any) -> Any:
+    return Field(default, description=spec.help or None)
+
+
+def _viewpoint_rule(schema: dict) -> None:
+    """Say in the JSON schema what :meth:`OrientationParams._viewpoint_given` enforces:
+    orientation 'viewpoint' comes with a viewpoint (without if/then/not)."""
+    others = [o for o in curvature.ORIENTATIONS if o != "viewpoint"]
+    schema.setdefault("allOf", []).append({"anyOf": [
+        {"properties": {"orientation": {"enum": [*others, None]}}},
+        {"required": ["viewpoint"], "properties": {"viewpoint": {"type": "array"}}}]})
 
 
 class OrientationParams(BaseModel):
     """Fields every method shares: orientation and viewpoint."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", json_schema_extra=_viewpoint_rule)
 
     orientation: Literal[tuple(curvature.ORIENTATIONS)] | None = Field(
         None, description="How normals are oriented (signs of k1, k2, H). Default: 'normals' "
         "when the input has normals, 'viewpoint' when a viewpoint is given, else 'auto'.")
-    viewpoint: tuple[float, float, float] | None = Field(
+    viewpoint: tuple[Number, Number, Number] | None = Field(
         None, description="Scanner position [x, y, z]; normals are turned to face it.")
 
     @field_validator("viewpoint")
@@ -82,18 +105,20 @@ class OrientationParams(BaseModel):
 def _fit_only_schema(schema: dict) -> None:
     """Say in the JSON schema what :meth:`CommonParams._consistent` enforces: a fit-only
     parameter (e.g. ``solver``) is refused unless ``fit`` is one of its models (the default
-    fit counts when ``fit`` is absent)."""
+    fit counts when ``fit`` is absent); and the viewpoint rule of every method."""
+    _viewpoint_rule(schema)
     rules = []
     default_fit = schema.get("properties", {}).get("fit", {}).get("default")
     for name, only_fits in FIT_ONLY.items():
         if name not in schema.get("properties", {}):
             continue
-        other_fit = {"required": ["fit"],
-                     "properties": {"fit": {"not": {"enum": list(only_fits)}}}}
-        if default_fit not in only_fits:  # an absent fit is another fit too
-            other_fit = {"anyOf": [other_fit, {"not": {"required": ["fit"]}}]}
-        rules.append({"if": other_fit,
-                      "then": {"properties": {name: {"type": "null"}}}})
+        # Said without if/then/not (fuzzers read those poorly): the fit is one of its
+        # models, or the parameter is absent or null.
+        allowed = [{"required": ["fit"], "properties": {"fit": {"enum": list(only_fits)}}},
+                   {"properties": {name: {"type": "null"}}}]
+        if default_fit in only_fits:  # an absent fit is its model too
+            allowed.append({"properties": {"fit": False}})
+        rules.append({"anyOf": allowed})
     if rules:
         schema.setdefault("allOf", []).extend(rules)
 
@@ -148,7 +173,11 @@ AUTO_DESCRIPTION = ("Measures the cloud's noise and spacing and picks model and 
 
 
 def _auto_model() -> type[BaseModel]:
-    fields: dict[str, Any] = {"method": (Literal["auto"], Field(description="Method."))}
+    # Parameters without 'method' are the default method's: the schema says so by leaving
+    # 'method' optional there (and required in every other method's parameters).
+    tag = Field("auto", description="Method.") if DEFAULT_METHOD == "auto" else \
+        Field(description="Method.")
+    fields: dict[str, Any] = {"method": (Literal["auto"], tag)}
     for spec in curvature.AUTO_PARAMS:
         fields[spec.name] = (_annotation(spec), _field(spec, spec.default))
     return create_model("AutoParams", __base__=OrientationParams,
@@ -185,10 +214,19 @@ def default_params() -> BaseModel:
 Vector3 = tuple[float, float, float]
 
 
+def _normals_rule(schema: dict) -> None:
+    """Orientation 'normals' comes with ``normals`` (the server refuses it without)."""
+    others = [o for o in curvature.ORIENTATIONS if o != "normals"]
+    schema.setdefault("allOf", []).append({"anyOf": [
+        {"required": ["normals"], "properties": {"normals": {"type": "array"}}},
+        {"properties": {"params": {"anyOf": [
+            {"type": "null"}, {"properties": {"orientation": {"enum": [*others, None]}}}]}}}]})
+
+
 class CloudRequest(BaseModel):
     """A cloud sent as JSON arrays (the alternative to a multipart file upload)."""
 
-    model_config = ConfigDict(extra="forbid")
+    model_config = ConfigDict(extra="forbid", json_schema_extra=_normals_rule)
 
     points: list[Vector3] = Field(min_length=10, description=(
         "Coordinates, one [x, y, z] per point; at least 10 points."))
@@ -204,11 +242,15 @@ class CloudRequest(BaseModel):
 class MultipartCloudRequest(BaseModel):
     """A cloud file upload (multipart/form-data)."""
 
+    model_config = ConfigDict(extra="forbid")  # the server refuses any other part
+
     file: bytes = Field(json_schema_extra={"format": "binary"}, description=(
         "The cloud file; the extension of its file name gives the format: "
         + ", ".join(INPUT_EXTENSIONS) + "."))
-    params: str | None = Field(None, description=(
-        "JSON object with the method and fit parameters, e.g. {\"method\": \"knn\", \"k\": 10}."))
+    # A JSON text part (encoding application/json in the route), so the schema is the object.
+    params: MethodParams | None = Field(  # type: ignore[valid-type]
+        None, description=("JSON object with the method and fit parameters, e.g. "
+                           "{\"method\": \"knn\", \"k\": 10}."))
 
 
 # -- responses ------------------------------------------------------------------------------

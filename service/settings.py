@@ -76,6 +76,16 @@ class Settings(BaseSettings):
     min_upload_bytes_per_second: int = Field(
         1024, ge=0, description="Past the first read timeout, a body arriving slower than "
         "this on average is answered 408.")
+    header_timeout_seconds: float = Field(
+        10, gt=0, description="A request's line and headers must arrive within this many "
+        "seconds of its first byte (or of the connection's opening); else 408 and closed.")
+    max_header_bytes: int = Field(
+        64 << 10, ge=4096, description="Largest request line plus headers (431 beyond).")
+    max_pending_connections: int = Field(
+        512, ge=1, description="Connections waiting for their request headers at once; a "
+        "new one beyond this closes the one that waited longest (slowloris).")
+    keep_alive_timeout_seconds: float = Field(
+        5, gt=0, description="An idle keep-alive connection is closed after this long.")
     max_concurrent_uploads: int = Field(
         256, ge=1, description="Uploads in progress at once (503 beyond; also kept below what "
         "the file descriptor limit allows).")

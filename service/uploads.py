@@ -24,7 +24,7 @@ from starlette.requests import ClientDisconnect
 from .formats import INPUT_EXTENSIONS, extension_of
 from .input_guard import check_numpy_file
 from .inputs import CloudInput, check_cloud
-from .json_count import member_rows
+from .json_count import scan_members
 from .param_errors import parameter_message
 from .problem_types import ProblemError
 from .problems import HTTPProblem, validation_errors
@@ -314,8 +314,8 @@ def _decode_cloud(body: bytes, folder: Path, max_points: int | None = None) -> t
     The points are counted on the raw bytes first (:mod:`service.json_count`): a cloud of
     more than ``max_points`` is refused before any Python object is built for it.
     """
+    rows, texty = scan_members(body)
     if max_points is not None:
-        rows = member_rows(body)
         n = max(rows.get("points", 0), rows.get("normals", 0))
         if n > max_points:
             raise HTTPProblem("cloud-too-large", f"the cloud has {n} points; this service "
@@ -329,11 +329,21 @@ def _decode_cloud(body: bytes, folder: Path, max_points: int | None = None) -> t
                           f"{sorted(_JSON_KEYS)}")
     if "points" not in doc:
         raise HTTPProblem("invalid-request", "missing member 'points'")
+    for name in ("points", "normals", "faces"):
+        if name in texty and doc.get(name) is not None:
+            raise HTTPProblem("invalid-cloud", f"{name}: expected numbers (or null), found "
+                              "true, false or a string")
     params = parse_params(doc.get("params"))
     # JSON null becomes NaN here, so it is reported as a non-finite coordinate.
     points = _as_array(doc["points"], "points", np.float64)
     normals = None if doc.get("normals") is None else _as_array(doc["normals"], "normals",
                                                                 np.float64)
+    if params.get("orientation") == "normals" and normals is None:  # as the schema says
+        raise HTTPProblem("invalid-parameters", "orientation 'normals' needs per-point "
+                          "normals: send 'normals' with the points")
+    if normals is not None and not np.isfinite(normals).all():  # null, as the schema says
+        row = int(np.flatnonzero(~np.isfinite(normals).all(axis=1))[0])
+        raise HTTPProblem("invalid-cloud", f"normals: row {row} is not three finite numbers")
     faces = None
     if doc.get("faces") is not None and not isinstance(doc["faces"], list):
         raise HTTPProblem("invalid-cloud", "faces: expected a list of [i, j, k] index triples")

@@ -30,7 +30,8 @@ def ragged_take(flat_start: np.ndarray, counts: np.ndarray, step: int = 1) -> np
 
 
 def triangulate(source, counts, indices, n_vertices: int, *,
-                where: Locator = no_location, label: str = "face") -> np.ndarray | None:
+                where: Locator = no_location, label: str = "face",
+                first_row: int = 0) -> np.ndarray | None:
     """Fan-triangulate polygons and check that every index names an existing vertex.
 
     Parameters
@@ -45,6 +46,8 @@ def triangulate(source, counts, indices, n_vertices: int, *,
         Number of vertices the indices may refer to.
     where : callable
         Maps a polygon row to ``line=``/``offset=`` for the error.
+    first_row : int
+        Number of the first polygon in messages (when polygons come in blocks).
 
     Returns
     -------
@@ -66,8 +69,9 @@ def triangulate(source, counts, indices, n_vertices: int, *,
         first_bad = int(np.flatnonzero(bad)[0])
         row = int(np.searchsorted(np.cumsum(counts), first_bad, side="right"))
         raise FormatError(
-            source, f"{label} {row} refers to vertex {int(indices[first_bad])}, but there are "
-                    f"only {n_vertices} vertices (valid 0..{n_vertices - 1})", **where(row))
+            source, f"{label} {first_row + row} refers to vertex {int(indices[first_bad])}, "
+                    f"but there are only {n_vertices} vertices (valid 0..{n_vertices - 1})",
+            **where(row))
     starts = np.cumsum(counts) - counts
     tris_per = np.maximum(counts - 2, 0)
     if tris_per.sum() == 0:

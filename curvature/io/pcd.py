@@ -16,7 +16,7 @@ from ..cloud import PointCloud
 from ..errors import FormatError, NonFiniteError
 from .checks import finish_cloud
 from .lzf import LZFError, lzf_decompress
-from .tokens import numbers, split_rows
+from .text_blocks import RowScanner, rows_values
 
 _KEYS = ("VERSION", "FIELDS", "COLUMNS", "SIZE", "TYPE", "COUNT", "WIDTH", "HEIGHT",
          "VIEWPOINT", "POINTS", "DATA")
@@ -178,31 +178,40 @@ def read_pcd(data: bytes, source=None) -> PointCloud:
 
 
 def _ascii_columns(data, h: PCDHeader, source):
-    text = data[h.body_offset:].decode("latin-1")
-    lines = text.split("\n")
-    numbered = [(i, ln) for i, ln in enumerate(lines) if ln.strip()]
-    if len(numbered) < h.points:
-        raise FormatError(source, f"header says {h.points} points but only {len(numbered)} "
-                                  "data lines follow", line=h.n_lines + len(lines))
-    numbered = numbered[:h.points]
-    first = h.n_lines + 1
-
-    def line_of(r):
-        return first + numbered[int(r)][0]
-
-    rows, lens = split_rows([ln for _, ln in numbered])
     width = sum(h.counts)
-    bad = np.flatnonzero(lens != width)
-    if bad.size:
-        r = bad[0]
-        raise FormatError(source, f"point {int(r)} has {lens[r]} values, expected {width} "
-                                  f"({' '.join(h.fields)})", line=line_of(r))
-    table = numbers(rows, source, line_of).reshape(h.points, width)
-    columns, col = {}, 0
+    scanner = RowScanner(data, h.body_offset, h.n_lines + 1, source)
+    # Fail fast on a header count the bytes cannot hold (a row takes >= 2 bytes a value),
+    # before anything is allocated for it.
+    fits = h.points <= (len(data) - h.body_offset + 1) // (2 * width)
+    found = 0
+    for block in scanner.blocks(h.points if fits else 0):  # pass 1: row widths and count
+        lens = block.tokens.lens[block.rows]
+        bad = np.flatnonzero(lens != width)
+        if bad.size:
+            r = int(bad[0])
+            raise FormatError(source, f"point {found + r} has {lens[r]} values, expected "
+                                      f"{width} ({' '.join(h.fields)})",
+                              line=block.first_line + int(block.rows[r]))
+        found += block.rows.size
+    if not fits:
+        found = sum(b.rows.size for b in scanner.blocks())
+    if found < h.points:
+        raise FormatError(source, f"header says {h.points} points but only {found} "
+                                  "data lines follow", line=scanner.end_line)
+    columns = {name: np.empty((h.points, c), dtype=dt)
+               for name, dt, c in zip(h.fields, h.dtypes, h.counts, strict=True)}
+    last = {name: i for i, name in enumerate(h.fields)}
+    at = 0
     with np.errstate(all="ignore"):
-        for name, dt, c in zip(h.fields, h.dtypes, h.counts, strict=True):
-            columns[name] = table[:, col:col + c].astype(dt)
-            col += c
+        for block in scanner.blocks(h.points):  # pass 2: values into the typed columns
+            rows = block.rows.size
+            table = rows_values(block, source).reshape(rows, width)
+            col = 0
+            for i, (name, c) in enumerate(zip(h.fields, h.counts, strict=True)):
+                if last[name] == i:  # a repeated name (padding '_') keeps its last field
+                    columns[name][at:at + rows] = table[:, col:col + c]
+                col += c
+            at += rows
     return columns
 
 
@@ -250,7 +259,7 @@ def _compressed_columns(data, h: PCDHeader, source):
 
 
 def _to_cloud(columns, h: PCDHeader, source) -> PointCloud:
-    points = np.concatenate([columns[a] for a in "xyz"], axis=1).astype(np.float64)
+    points = np.concatenate([columns[a] for a in "xyz"], axis=1, dtype=np.float64)
     keep = np.isfinite(points).all(axis=1)
     dropped = int(keep.size - np.count_nonzero(keep))
     if dropped:

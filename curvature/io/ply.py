@@ -65,12 +65,12 @@ def read_ply(data: bytes, source=None) -> PointCloud:
         elements = read_binary_elements(data, header, source, wanted)
     vertex = elements["vertex"]
     cols = vertex.scalars
-    points = np.stack([cols["x"], cols["y"], cols["z"]], axis=1).astype(np.float64)
+    points = np.stack([cols["x"], cols["y"], cols["z"]], axis=1, dtype=np.float64)
     used = {"x", "y", "z"}
     normals = None
     for names in NORMAL_NAMES:
         if all(n in cols for n in names):
-            normals = np.stack([cols[n] for n in names], axis=1).astype(np.float64)
+            normals = np.stack([cols[n] for n in names], axis=1, dtype=np.float64)
             used.update(names)
             break
     properties = unprefixed({k: v for k, v in cols.items() if k not in used})

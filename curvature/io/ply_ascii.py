@@ -1,12 +1,14 @@
-"""ASCII PLY bodies: one row per line, decoded a whole element at a time."""
+"""ASCII PLY bodies: one row per line, decoded a block of rows at a time."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from ..errors import FormatError
+from . import text_blocks
 from .faces import ragged_take
 from .ply_header import Element, ElementData, Header
+from .text_blocks import line_blocks
 from .tokens import block_numbers
 
 
@@ -14,8 +16,8 @@ def read_ascii_elements(data: bytes, header: Header, source, wanted: set[str]
                         ) -> dict[str, ElementData]:
     """Decode the elements named in ``wanted``; others are skipped by line count.
 
-    Line boundaries are located once with numpy, so skipped elements cost nothing and each
-    wanted element is parsed as one block.
+    The body is walked a block of lines at a time (:mod:`curvature.io.text_blocks`), so the
+    scratch memory is bounded by the block size; skipped elements cost a newline count.
 
     Raises
     ------
@@ -23,32 +25,90 @@ def read_ascii_elements(data: bytes, header: Header, source, wanted: set[str]
         Truncated body, wrong number of values in a row, non-numeric value, bad list length;
         each names the line.
     """
-    body = data[header.body_offset:]
-    ends = np.flatnonzero(np.frombuffer(body, dtype=np.uint8) == 10)
-    tail = ends[-1] + 1 if ends.size else 0
-    if body[tail:].strip():  # a last line without a newline
-        ends = np.append(ends, len(body))
+    start = header.body_offset
+    total = data.count(b"\n", start)
+    tail = data.rfind(b"\n", start) + 1 if total else start
+    if data[tail:].strip():  # a last line without a newline
+        total += 1
     first_body_line = header.n_lines + 1
-    pos = 0
+    pos, at = 0, start  # rows (lines) and bytes consumed
     out = {}
     for element in header.elements:
-        if pos + element.count > ends.size:
+        if pos + element.count > total:
             raise FormatError(
                 source, f"header says {element.count} {element.name} rows, but the file ends "
-                        f"after {ends.size - pos} of them", line=first_body_line + ends.size)
+                        f"after {total - pos} of them", line=first_body_line + total)
         if element.name in wanted:
-            lo = 0 if pos == 0 else int(ends[pos - 1]) + 1
-            line_ends = ends[pos:pos + element.count] - lo
-            hi = lo + (int(line_ends[-1]) if element.count else 0)
-            lens, flat = block_numbers(body[lo:hi], line_ends, source, first_body_line + pos)
-            out[element.name] = _decode(element, lens, flat, source, first_body_line + pos)
+            out[element.name], at = _read_element(data, at, element, source,
+                                                  first_body_line + pos)
+        else:
+            at = _skip_lines(data, at, element.count)
         pos += element.count
     return out
 
 
-def _decode(element: Element, lens: np.ndarray, flat: np.ndarray, source, first_line: int
-            ) -> ElementData:
-    """Split the values of one element into properties, checking every row's length."""
+def _skip_lines(data: bytes, at: int, count: int) -> int:
+    """Offset just after the ``count``-th newline from ``at`` (or the end)."""
+    while count > 0:
+        hi = min(at + text_blocks.BLOCK_BYTES, len(data))
+        found = data.count(b"\n", at, hi)
+        if found < count and hi < len(data):
+            at, count = hi, count - found
+            continue
+        if found < count:
+            return len(data)
+        ends = np.flatnonzero(np.frombuffer(data, dtype=np.uint8, count=hi - at,
+                                            offset=at) == 10)
+        return at + int(ends[count - 1]) + 1
+    return at
+
+
+def _read_element(data: bytes, at: int, element: Element, source, first_line: int
+                  ) -> tuple[ElementData, int]:
+    """The ``element.count`` rows from offset ``at``, a block at a time, and the offset
+    after them."""
+    scalars = {p.name: np.empty(element.count, dtype=p.dtype) for p in element.properties
+               if not p.is_list}  # filled block by block: no second copy
+    lists: dict[str, tuple[list, list]] = {p.name: ([], []) for p in element.properties
+                                            if p.is_list}
+    done = 0
+    for lo, hi, line in line_blocks(data, at, first_line=first_line, source=source):
+        if done == element.count:
+            break
+        block = data[lo:hi]
+        ends = np.flatnonzero(np.frombuffer(block, dtype=np.uint8) == 10)
+        if hi == len(data) and block[ends[-1] + 1 if ends.size else 0:].strip():
+            ends = np.append(ends, len(block))
+        ends = ends[:element.count - done]
+        lens, flat = block_numbers(block[:int(ends[-1])] if ends.size else b"", ends, source,
+                                   line)
+        part = _decode(element, lens, flat, source, line, done)
+        for name, values in part.scalars.items():
+            scalars[name][done:done + ends.size] = values
+        for name, (counts, items) in part.lists.items():
+            lists[name][0].append(counts)
+            lists[name][1].append(items)
+        done += ends.size
+        at = lo + (int(ends[-1]) + 1 if ends.size else 0)
+    empty = _decode(element, np.zeros(0, np.int64), np.zeros(0), source, first_line)
+    joined = {name: (_join(c) if c else empty.lists[name][0],
+                     _join(i) if i else empty.lists[name][1])
+              for name, (c, i) in lists.items()}
+
+    def where(row: int) -> dict:
+        return {"line": first_line + int(row)}
+
+    return ElementData(scalars, joined, where), min(at, len(data))
+
+
+def _join(arrays: list[np.ndarray]) -> np.ndarray:
+    return arrays[0] if len(arrays) == 1 else np.concatenate(arrays)
+
+
+def _decode(element: Element, lens: np.ndarray, flat: np.ndarray, source, first_line: int,
+            first_row: int = 0) -> ElementData:
+    """Split the values of rows of one element into properties, checking every row's
+    length (``first_row``: the element's row number of the first, for messages)."""
     props = element.properties
 
     def line_of(row: int) -> int:
@@ -58,7 +118,7 @@ def _decode(element: Element, lens: np.ndarray, flat: np.ndarray, source, first_
         return {"line": line_of(row)}
 
     def fail(row, message):
-        raise FormatError(source, f"{element.name} row {int(row)}: {message}",
+        raise FormatError(source, f"{element.name} row {first_row + int(row)}: {message}",
                           line=line_of(row))
 
     names = " ".join(p.name for p in props)

@@ -18,7 +18,8 @@ from ..cloud import PointCloud
 from ..errors import FormatError
 from .checks import finish_cloud
 from .columns import Table
-from .tokens import decode_text, number_texts, numbers, split_rows
+from .text_blocks import RowScanner, blank_comments, rows_values, separator_table, tokenize
+from .tokens import number_texts
 
 _NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?|[+-]?(nan|inf|infinity)",
                      re.IGNORECASE)
@@ -38,7 +39,7 @@ def _is_header(tokens: list[str]) -> bool:
 
 
 def read_text(data: bytes, source=None) -> PointCloud:
-    """Decode an xyz/csv/txt/asc point list.
+    """Decode an xyz/csv/txt/asc point list, a block of lines at a time.
 
     Returns
     -------
@@ -51,32 +52,31 @@ def read_text(data: bytes, source=None) -> PointCloud:
         Wrong column count, non-numeric value, NaN/Inf coordinate (naming the line), empty
         file or fewer than 10 points.
     """
-    text = decode_text(data, source)
-    lines = text.splitlines()
-    numbered = [(i, ln) for i, ln in enumerate(lines, start=1)
-                if ln.strip() and not ln.lstrip().startswith("#")]
-    if not numbered:
+    start = 3 if data.startswith(b"\xef\xbb\xbf") else 0
+    comments = lambda buf: blank_comments(buf, anywhere=False)  # noqa: E731
+    first = _first_row(data, start, 1, source, comments)
+    if first is None:
         raise FormatError(source, "the file holds no points")
+    lo, line_no, text = first
     names = None
-    first = numbered[0][1]
-    head_sep = _separator(first)
-    first_tokens = (first.replace(",", ".") if head_sep == ";" else first).split(head_sep)
+    head_sep = _separator(text)
+    first_tokens = (text.replace(",", ".") if head_sep == ";" else text).split(head_sep)
     if _is_header(first_tokens):
-        names = [t.strip().strip('"').strip("'").lower() for t in first.split(head_sep)]
-        header_line = numbered[0][0]
-        numbered = numbered[1:]
-        if not numbered:
+        names = [t.strip().strip('"').strip("'").lower() for t in text.split(head_sep)]
+        header_line = line_no
+        nl = data.find(b"\n", lo)
+        first = _first_row(data, nl + 1 if nl >= 0 else len(data), line_no + 1, source,
+                           comments)
+        if first is None:
             raise FormatError(source, "the file holds a header line but no points")
-    sep = _separator(numbered[0][1])
-    if sep == ";":  # semicolon files (spreadsheet exports) may use decimal commas
-        numbered = [(i, ln.replace(",", ".")) for i, ln in numbered]
-    body = [ln for _, ln in numbered]
+        lo, line_no, text = first
+    sep = _separator(text)
+    translate = separator_table(sep)
 
-    def line_of(r):
-        return numbered[int(r)][0]
+    def prepare(buf: bytes) -> bytes:
+        return comments(translate(buf) if translate is not None else buf)
 
-    rows, lens = split_rows(body, sep)
-    width = int(lens[0])
+    width = int(tokenize(prepare(text.encode("utf-8"))).lens.sum())
     if names is not None:
         if len(names) != width:
             raise FormatError(source, f"the header names {len(names)} columns but the first "
@@ -89,24 +89,47 @@ def read_text(data: bytes, source=None) -> PointCloud:
             names = None
     elif width not in (3, 6):
         raise FormatError(source, f"{width} columns, expected 3 (x y z) or 6 "
-                                  "(x y z nx ny nz)", line=line_of(0))
-    bad = np.flatnonzero(lens != width)
-    if bad.size:
-        r = bad[0]
-        raise FormatError(source, f"{lens[r]} columns, expected {width} like the first row",
-                          line=line_of(r))
-    table = numbers(rows, source, line_of).reshape(len(rows), width)
+                                  "(x y z nx ny nz)", line=line_no)
+    scanner = RowScanner(data, lo, line_no, source, prepare)
+    n = 0
+    for block in scanner.blocks():  # pass 1: every row's width, and how many rows
+        lens = block.tokens.lens[block.rows]
+        bad = np.flatnonzero(lens != width)
+        if bad.size:
+            raise FormatError(source, f"{lens[bad[0]]} columns, expected {width} like the "
+                                      "first row", line=block.first_line + int(block.rows[bad[0]]))
+        n += block.rows.size
+    table = np.empty((n, width), dtype=np.float64)
+    at = 0
+    for block in scanner.blocks():  # pass 2: the numbers, straight into the table
+        rows = block.rows.size
+        table[at:at + rows] = rows_values(block, source).reshape(rows, width)
+        at += rows
     if names is None:
         names = ["x", "y", "z", "nx", "ny", "nz"][:width]
     index = {n: i for i, n in enumerate(names)}
-    points = table[:, [index[a] for a in "xyz"]]
+    xyz = [index[a] for a in "xyz"]
+    points = table if xyz == [0, 1, 2] and width == 3 else table[:, xyz]
     normals = None
     if all(n in index for n in ("nx", "ny", "nz")):
         normals = table[:, [index[n] for n in ("nx", "ny", "nz")]]
     used = {"x", "y", "z"} | ({"nx", "ny", "nz"} if normals is not None else set())
     properties = {n: table[:, i].copy() for n, i in index.items() if n not in used}
     return finish_cloud(source, points, normals=normals, properties=properties,
-                        where=lambda r: {"line": line_of(r)})
+                        where=lambda r: {"line": scanner.line_of_row(int(r))})
+
+
+def _first_row(data: bytes, start: int, first_line: int, source, prepare
+               ) -> tuple[int, int, str] | None:
+    """Offset, line number and text of the first line at or after ``start`` that is not
+    blank or a comment; None when there is none."""
+    for block in RowScanner(data, start, first_line, source, prepare).blocks(max_rows=1):
+        row = int(block.rows[0])
+        line_lo = int(block.tokens.line_ends[row - 1]) + 1 if row else 0
+        line_hi = int(block.tokens.line_ends[row])
+        text = data[block.offset + line_lo:block.offset + line_hi].decode("utf-8")
+        return block.offset + line_lo, block.first_line + row, text.rstrip("\r")
+    return None
 
 
 def write_csv(fh: BinaryIO, table: Table) -> None:

@@ -11,16 +11,6 @@ import numpy as np
 from ..errors import FormatError
 
 
-def decode_text(data: bytes, source, *, start: int = 0) -> str:
-    """Decode a text body (UTF-8, BOM allowed), naming the byte offset of a bad byte."""
-    try:
-        text = data[start:].decode("utf-8")
-    except UnicodeDecodeError as exc:
-        raise FormatError(source, f"not a text file: byte 0x{data[start + exc.start]:02x} is "
-                                  "not valid UTF-8", offset=start + exc.start) from None
-    return text.removeprefix("\ufeff")
-
-
 def split_rows(lines: Sequence[str], sep: str | None = None
                ) -> tuple[list[list[str]], np.ndarray]:
     """Split every line into tokens.

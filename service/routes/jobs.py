@@ -37,8 +37,17 @@ from ..uploads import receive_cloud
 router = APIRouter(prefix="/v1/jobs", tags=["jobs"],
                    responses=problem_responses("unauthorized", "not-ready", "store-busy"))
 
+# The file part's name must end in a known extension; OpenAPI cannot constrain a part's file
+# name, so the encoding shows one (fuzzers such as schemathesis send it).
 CLOUD_BODY = {"requestBody": {"required": True, "content": {
-    "multipart/form-data": {"schema": {"$ref": "#/components/schemas/MultipartCloudRequest"}},
+    "multipart/form-data": {
+        "schema": {"$ref": "#/components/schemas/MultipartCloudRequest"},
+        "encoding": {"file": {"contentType": "application/octet-stream", "headers": {
+            "Content-Disposition": {
+                "description": "The file name's extension names the format.",
+                "schema": {"type": "string",
+                           "example": 'form-data; name="file"; filename="cloud.xyz"'}}}},
+            "params": {"contentType": "application/json"}}},
     "application/json": {"schema": {"$ref": "#/components/schemas/CloudRequest"}},
 }}}
 RESULT_CONTENT = {RESULT_MEDIA_TYPES[f].split(";")[0]: {"schema": {

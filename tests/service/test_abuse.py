@@ -301,6 +301,32 @@ def test_schema_refuses_what_the_server_refuses(client):
         assert client.post("/v1/jobs", json=body).status_code == 422
     good = {"points": points, "params": {"method": "knn", "solver": "algebraic"}}
     assert validator.is_valid(good)
+    # Found by schemathesis --checks all (scripts/api_fuzz.py): each refused by both.
+    with_false = [p[:2] + [False] if i == 3 else p for i, p in enumerate(points)]
+    with_text = [[str(v) for v in p] if i == 5 else p for i, p in enumerate(points)]
+    bad = [{"points": with_false}, {"points": with_text},
+           {"points": points, "normals": [[0, 0, None]] + points[1:]},
+           {"points": points, "params": {"method": "knn", "k": True}},
+           {"points": points, "params": {"method": "knn", "viewpoint": [0, 0, False]}},
+           {"points": points, "params": {"method": "knn", "orientation": "viewpoint"}},
+           {"points": points, "params": {"method": "knn", "orientation": "normals"}},
+           {"points": points, "params": {"method": "egg", "fit": "nfr", "normal_k": -3}}]
+    for body in bad:
+        assert not validator.is_valid(body), body
+        answer = client.post("/v1/jobs", json=body)
+        assert answer.status_code == 422, (body, answer.text)
+    for body in ({"points": points, "params": {}}, {"points": points, "params": {"k": 96}},
+                 {"points": points, "normals": points,
+                  "params": {"method": "knn", "orientation": "normals"}}):
+        assert validator.is_valid(body), body
+        answer = client.post("/v1/jobs", json=body)
+        assert answer.status_code == 202, (body, answer.text)
+        client.delete(f"/v1/jobs/{answer.json()['id']}")
+    # A multipart body names only its two parts, the params part being the same object.
+    upload = spec["paths"]["/v1/jobs"]["post"]["requestBody"]["content"]["multipart/form-data"]
+    assert spec["components"]["schemas"]["MultipartCloudRequest"]["additionalProperties"] \
+        is False
+    assert upload["encoding"]["params"]["contentType"] == "application/json"
 
 
 # -- finding 3: memory bounded before work -------------------------------------------------------
