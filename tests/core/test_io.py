@@ -276,6 +276,30 @@ def test_result_json(tmp_path):
     assert doc["info"]["params"] == {"k": 24}
 
 
+def test_result_json_numbers_read_back_exactly_across_blocks(monkeypatch):
+    """Every number reads back bit for bit (float64 and float32 attributes, big-endian ones
+    too), non-finite values are null, and blocks join with exactly one comma."""
+    from curvature.io import json_format
+
+    monkeypatch.setattr(json_format, "_CHUNK_ROWS", 7)  # 30 points: blocks of 7, 7, 7, 7, 2
+    res = make_result()
+    rng = np.random.default_rng(5)
+    res.k2 = rng.normal(size=30) * 10.0 ** rng.integers(-300, 300, 30)
+    res.k2[3], res.k2[4] = np.inf, -np.inf
+    res.attributes["intensity"] = rng.random(30).astype(np.float32)
+    res.attributes["height"] = rng.normal(size=30).astype(">f8")
+    doc = json.loads(write_bytes(res, "json"))
+    k2 = doc["fields"]["k2"]
+    assert k2[3] is None and k2[4] is None and len(k2) == 30
+    finite = np.isfinite(res.k2)
+    np.testing.assert_array_equal(np.array(k2, dtype=object)[finite].astype(float),
+                                  res.k2[finite])
+    np.testing.assert_array_equal(np.float32(doc["fields"]["intensity"]),
+                                  res.attributes["intensity"])
+    np.testing.assert_array_equal(doc["fields"]["height"], res.attributes["height"])
+    assert doc["fields"]["points"] == res.points.tolist()
+
+
 def test_cloud_with_properties_round_trips_types(tmp_path):
     pts, quads = grid_mesh()
     n = len(pts)
