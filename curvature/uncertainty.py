@@ -22,8 +22,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["ANCHORED_MEAN_SHARE", "CLEAN_CALIBRATION", "FIT_CALIBRATION", "STD_FLOOR", "THIN_NEIGHBORS",
-           "UNCERTAIN_SHARE", "uncertain", "with_floor"]
+__all__ = ["ANCHORED_MEAN_SHARE", "CLEAN_CALIBRATION", "FIT_CALIBRATION", "STD_FLOOR",
+           "THIN_NEIGHBORS", "UNCERTAIN_SHARE", "uncertain", "with_floor"]
 
 #: Factor of the height-function covariance per fit model (benchmarks/uncertainty.py).
 FIT_CALIBRATION = {"monge": 1.0, "adaptive": 1.0, "implicit": 1.0, "nfr": 1.0}
