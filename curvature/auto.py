@@ -545,7 +545,8 @@ class AutoRun:
         """Standard errors of the clean fits: the model error their residual implies."""
         with np.errstate(invalid="ignore", divide="ignore"):
             std = CLEAN_CALIBRATION * res.residual / self.clean_h ** 2
-        std = with_floor(np.where(res.status == Status.OK, std, np.nan), res.k1, res.k2)
+        std = with_floor(np.where(res.status == Status.OK, std, np.nan), res.k1, res.k2,
+                         1.0 / self.plan.spacing)
         res.k1_std[:] = std
         res.k2_std[:] = std
         res.mean_std[:] = std
@@ -557,7 +558,7 @@ class AutoRun:
         query = np.arange(self.points.shape[0], dtype=np.int64)
         t0 = time.perf_counter()
         for sl in self._chunks(query.shape[0]):
-            out = _OutputView(res, query[sl])
+            out = _OutputView(res, query[sl], 1.0 / self.plan.spacing)
             nfr_from_anchors(self.points, query[sl], owner[sl], reps, *fits, *out.arrays)
             out.store(chosen[owner[sl]], err[owner[sl]])
             self._tick(sl.stop - sl.start)
@@ -607,7 +608,7 @@ class AutoRun:
         both = np.concatenate([sub, self.points])
         for sl in self._chunks(n):
             query = np.arange(sl.start, sl.stop, dtype=np.int64)
-            out = _OutputView(res, query)
+            out = _OutputView(res, query, 1.0 / self.plan.spacing)
             nfr_from_anchors(both, ns + query, anchor_of[sl], reps, *fits, *out.arrays)
             # A kept fit over s thinned points spans the patch of s / share points.
             out.store(np.rint(chosen[anchor_of[sl]] / share).astype(np.int64),
@@ -656,7 +657,7 @@ class AutoRun:
         local[used] = np.arange(used.shape[0])
         fits, fit_reach, chosen, err = self._fit_anchors(
             reps[used], field, min(k, self.points.shape[0] - 1), r_normal)
-        out = _OutputView(res, failed.astype(np.int64))
+        out = _OutputView(res, failed.astype(np.int64), 1.0 / self.plan.spacing)
         nfr_from_anchors(self.points, failed.astype(np.int64), local[owner[failed]], reps[used],
                          *fits, *out.arrays)
         out.store(chosen[local[owner[failed]]], err[local[owner[failed]]])
@@ -756,9 +757,10 @@ def _outputs(res, sl: slice) -> tuple:
 class _OutputView:
     """Scratch outputs for scattered query rows, copied into the result by :meth:`store`."""
 
-    def __init__(self, res, rows: np.ndarray):
+    def __init__(self, res, rows: np.ndarray, floor_scale: float = 0.0):
         m = rows.shape[0]
         self.res = res
+        self.floor_scale = floor_scale  # 1 / spacing: the rounding floor of the errors
         self.rows = rows
         self.arrays = (np.empty(m), np.empty(m), np.empty((m, 3)), np.empty((m, 3)),
                        np.empty((m, 3)), np.empty(m), np.empty(m, np.int8))
@@ -773,7 +775,8 @@ class _OutputView:
         self.res.normals[r], self.res.dir1[r], self.res.dir2[r] = normals, dir1, dir2
         self.res.neighbor_count[r] = neighbor_count
         if std is not None:
-            std = with_floor(np.where(status == Status.OK, std, np.nan), k1, k2)
+            std = with_floor(np.where(status == Status.OK, std, np.nan), k1, k2,
+                             self.floor_scale)
             self.res.k1_std[r] = std
             self.res.k2_std[r] = std
             self.res.mean_std[r] = ANCHORED_MEAN_SHARE * std

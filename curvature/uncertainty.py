@@ -30,9 +30,9 @@ FIT_CALIBRATION = {"monge": 1.0, "adaptive": 1.0, "implicit": 1.0, "nfr": 1.0}
 #: Curvature error per unit of residual / h^2 of a noise-free implicit quadric fit.
 CLEAN_CALIBRATION = 7.0
 #: Standard error of H per unit of the anchored fits' error of k1 and k2.
-ANCHORED_MEAN_SHARE = 1.0
+ANCHORED_MEAN_SHARE = 0.8
 #: Relative floor of a standard error (share of max(|k1|, |k2|)).
-STD_FLOOR = 1e-10
+STD_FLOOR = 1e-9
 #: A point is uncertain when a standard error of k1 or k2 exceeds this share of its
 #: curvature: then the 2-sigma interval of a curvature reaches past zero.
 UNCERTAIN_SHARE = 0.5
@@ -40,9 +40,14 @@ UNCERTAIN_SHARE = 0.5
 THIN_NEIGHBORS = 10
 
 
-def with_floor(std: np.ndarray, k1: np.ndarray, k2: np.ndarray) -> np.ndarray:
-    """``sqrt(std^2 + (STD_FLOOR max(|k1|, |k2|))^2)``, shape (n,)."""
-    floor = STD_FLOOR * np.maximum(np.abs(k1), np.abs(k2))
+def with_floor(std: np.ndarray, k1: np.ndarray, k2: np.ndarray,
+               scale: float = 0.0) -> np.ndarray:
+    """``sqrt(std^2 + (STD_FLOOR max(|k1|, |k2|, scale))^2)``, shape (n,).
+
+    ``scale`` (1 / length, e.g. 1 / point spacing) keeps the floor above rounding on flat
+    faces, where the curvature itself is zero.
+    """
+    floor = STD_FLOOR * np.maximum(np.maximum(np.abs(k1), np.abs(k2)), scale)
     return np.hypot(std, floor)
 
 

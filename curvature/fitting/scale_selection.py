@@ -64,7 +64,7 @@ CALIBRATION = (7.0, 5.8, 1.9, 2.6, 4.4)
 SIGMA_GROWTH = 2.0
 #: A kept fit's curvature farther than this many combined standard errors from a smaller
 #: fit's shows a bias of the kept fit: the excess is its estimate (``bias`` output).
-BIAS_SLACK = 2.0
+BIAS_SLACK = 1.5
 #: Relative floor of sigma (times 1 / h): noise-free fits are exact only up to rounding.
 SIGMA_FLOOR = 1e-7
 # A foot point farther than this many fit units from the anchor means the fit missed it.
