@@ -20,6 +20,7 @@ from .auto import AUTO_PARAMS, AutoRun
 from .cloud import PointCloud
 from .errors import ParameterError
 from .fitting import FIT_PARAMS, FITS, fit_neighborhoods, resolve_fit, stage1_normals
+from .fitting.uncertainty import design_std
 from .neighborhoods import FINDERS, make_finder
 from .neighborhoods.kdtree import build_tree, knn_parallel
 from .orientation import (
@@ -33,6 +34,7 @@ from .orientation import (
 from .params import resolve_params
 from .result import CurvatureResult
 from .spatial_order import inverse_permutation, morton_order
+from .uncertainty import FIT_CALIBRATION, uncertain, with_floor
 from .validation import as_faces, as_points, as_vectors
 
 ORIENTATIONS = ("auto", "normals", "viewpoint")
@@ -266,6 +268,8 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
     res = unpermute(res, inv, pts, tri)
     res.mean[:] = 0.5 * (res.k1 + res.k2)
     res.gaussian[:] = res.k1 * res.k2
+    res.uncertain[:] = uncertain(res.k1, res.k2, res.k1_std, res.k2_std, res.neighbor_count,
+                                 res.status, float(np.linalg.norm(np.ptp(pts, axis=0))))
     timings["total"] = time.perf_counter() - t_start
     res.info = {
         **info, "preset": preset, "orientation": req.mode, "workers": req.workers, "points": n,
@@ -458,6 +462,13 @@ def fit_chunks(spts, finder, res, graph, fit, fit_opts, nthreads, chunk_size, pr
             out.k1, out.k2, out.residual, out.status
         res.normals[sl], res.dir1[sl], res.dir2[sl] = out.normals, out.dir1, out.dir2
         res.neighbor_count[sl] = nbhd.sizes()
+        t1 = time.perf_counter()
+        design_std(spts, q, nbhd.indptr, nbhd.indices, bool(fit_opts["include_self"]),
+                   out.dir1, out.dir2, out.residual, out.status, FIT_CALIBRATION[fit],
+                   res.k1_std[sl], res.k2_std[sl], res.mean_std[sl])
+        for name in ("k1_std", "k2_std", "mean_std"):
+            getattr(res, name)[sl] = with_floor(getattr(res, name)[sl], out.k1, out.k2)
+        timings["std"] = timings.get("std", 0.0) + time.perf_counter() - t1
         if graph is not None:
             graph[sl] = first_neighbors(nbhd)
         if reach is not None:
@@ -500,9 +511,9 @@ def neighborhood_reach(points, query, nbhd, radius=None) -> np.ndarray:
     return out
 
 
-# Result fields computed from k1 and k2 at the very end (never written before, so their pages
-# cost no memory while a big cloud is computed).
-DERIVED = ("mean", "gaussian")
+# Result fields computed from k1 and k2 (and their errors) at the very end (never written
+# before, so their pages cost no memory while a big cloud is computed).
+DERIVED = ("mean", "gaussian", "uncertain")
 
 
 def empty_result(pts: np.ndarray, faces) -> CurvatureResult:
@@ -512,7 +523,8 @@ def empty_result(pts: np.ndarray, faces) -> CurvatureResult:
         points=pts, k1=np.empty(n), k2=np.empty(n), mean=np.empty(n), gaussian=np.empty(n),
         normals=np.empty((n, 3)), dir1=np.empty((n, 3)), dir2=np.empty((n, 3)),
         neighbor_count=np.empty(n, np.int32), status=np.empty(n, np.int8),
-        residual=np.empty(n), faces=faces)
+        residual=np.empty(n), k1_std=np.empty(n), k2_std=np.empty(n), mean_std=np.empty(n),
+        uncertain=np.empty(n, np.uint8), faces=faces)
 
 
 def unpermute(res: CurvatureResult, inv: np.ndarray, pts: np.ndarray, faces) -> CurvatureResult:
@@ -524,7 +536,7 @@ def unpermute(res: CurvatureResult, inv: np.ndarray, pts: np.ndarray, faces) -> 
     fields = res.fields()
     for name in list(fields):
         if name in DERIVED:
-            fields[name] = np.empty(inv.shape[0])
+            fields[name] = np.empty(inv.shape[0], fields[name].dtype)
         else:
             fields[name] = fields[name][inv]
         setattr(res, name, fields[name])
@@ -543,6 +555,9 @@ def orient(res: CurvatureResult, mode: str, ref_normals, viewpoint, graph) -> No
     else:
         signs = signs_auto(res.points, res.normals, graph)
     apply_signs(signs, res.k1, res.k2, res.normals, res.dir1, res.dir2)
+    # k1 and k2 swap where the normal flips: so do their standard errors
+    flip = signs < 0
+    res.k1_std[flip], res.k2_std[flip] = res.k2_std[flip], res.k1_std[flip].copy()
 
 
 __all__ = ["FITS", "METHODS", "ORIENTATIONS", "PRESETS", "estimate"]
