@@ -10,7 +10,7 @@ Public surface (DESIGN.md section 5)::
 """
 
 from . import synthetic
-from .auto import AUTO_PARAMS
+from .estimators.auto import AUTO_PARAMS
 from .cloud import PointCloud
 from .errors import (
     CurvatureInputError,

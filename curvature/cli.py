@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .auto import AUTO_PARAMS
+from .estimators.auto import AUTO_PARAMS
 from .errors import CurvatureInputError
 from .fitting import FIT_PARAMS, FITS, SOLVERS
 from .io import read, write
@@ -295,7 +295,7 @@ def cmd_neighbors(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    from . import paper_study
+    from .studies import paper as paper_study
 
     if args.seeds is not None and args.seeds < 1:
         raise CurvatureInputError(f"--seeds must be >= 1, got {args.seeds}")
@@ -318,7 +318,7 @@ def cmd_bench(args) -> int:
 
 
 def bench_accuracy(args) -> int:
-    from . import accuracy_study
+    from .studies import accuracy as accuracy_study
 
     changes = {"workers": args.workers}
     if args.seeds is not None:
@@ -332,7 +332,7 @@ def bench_accuracy(args) -> int:
 
 
 def bench_parts(args, out) -> int:
-    from . import parts_study
+    from .studies import parts as parts_study
 
     estimators = [e for e in parts_study.ESTIMATORS if not (args.no_apss and e == "apss")]
     parts_study.run_parts(out, quick=args.quick, estimators=estimators)

@@ -16,13 +16,13 @@ import numba
 import numpy as np
 
 from .attributes import carry_input, file_viewpoint, orientation_rule
-from .auto import AUTO_PARAMS, AutoRun
-from .cloud import PointCloud
-from .errors import ParameterError
-from .fitting import FIT_PARAMS, FITS, fit_neighborhoods, resolve_fit, stage1_normals
-from .neighborhoods import FINDERS, make_finder
-from .neighborhoods.kdtree import build_tree, knn_parallel
-from .orientation import (
+from ..estimators.auto import AUTO_PARAMS, AutoRun
+from ..cloud import PointCloud
+from ..errors import ParameterError
+from ..fitting import FIT_PARAMS, FITS, fit_neighborhoods, resolve_fit, stage1_normals
+from ..neighborhoods import FINDERS, make_finder
+from ..neighborhoods.kdtree import build_tree, knn_parallel
+from ..orientation import (
     ORIENT_K,
     apply_signs,
     first_neighbors,
@@ -30,10 +30,10 @@ from .orientation import (
     signs_from_normals,
     signs_from_viewpoint,
 )
-from .params import resolve_params
-from .result import CurvatureResult
+from ..params import resolve_params
+from ..result import CurvatureResult
 from .spatial_order import inverse_permutation, morton_order
-from .validation import as_faces, as_points, as_vectors
+from ..validation import as_faces, as_points, as_vectors
 
 ORIENTATIONS = ("auto", "normals", "viewpoint")
 DEFAULT_METHOD = "auto"
@@ -159,7 +159,7 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
         Coordinates. A PointCloud also supplies normals and faces unless given here.
     method : {"auto", "knn", "tc", "egg", "mesh"}, optional
         "auto" (the default) measures the cloud's noise and spacing and picks model and scale
-        itself (:mod:`curvature.auto`; parameters ``k``, ``normal_k``, ``noise_threshold``).
+        itself (:mod:`curvature.estimators.auto`; parameters ``k``, ``normal_k``, ``noise_threshold``).
         The others are the neighborhood methods of DESIGN.md 4.1-4.4; their parameters go in
         ``**params``.
     fit : {"adaptive", "implicit", "monge", "nfr"}, optional
@@ -193,7 +193,7 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
         Query points per chunk.
     tile_points : int, optional
         Split the cloud into spatial tiles of about this many points, each computed with a
-        halo that is checked to hold everything its points depend on (:mod:`curvature.tiling`);
+        halo that is checked to hold everything its points depend on (:mod:`curvature.pipeline.tiling`);
         results are identical to an untiled run. Default: tiles of 1M points above 2M points
         (250k with an ``executor``); 0 never tiles.
     executor : object, optional

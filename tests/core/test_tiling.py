@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 import curvature
-from curvature import synthetic, tiling
+from curvature import synthetic
+from curvature.pipeline import tiling
 from curvature.pipeline import resolve_request
 
 
@@ -185,7 +186,7 @@ def test_executor_without_submit_is_a_parameter_error(torus):
 def test_a_tile_holds_every_point_within_each_core_points_room(seed):
     from scipy.spatial import cKDTree
 
-    from curvature.spatial_order import morton_order
+    from curvature.pipeline.spatial_order import morton_order
 
     rng = np.random.default_rng(seed)
     blobs = [rng.normal(c, 0.3, (3000, 3)) for c in ((0, 0, 0), (5, 1, 0), (2, 6, 3))]

@@ -6,8 +6,8 @@ import csv
 
 import pytest
 
-from curvature import accuracy_study
-from curvature.accuracy_study import AccuracyConfig, run_accuracy, summary_markdown, verdicts
+from curvature.studies import accuracy as accuracy_study
+from curvature.studies.accuracy import AccuracyConfig, run_accuracy, summary_markdown, verdicts
 from curvature.cli import main
 
 

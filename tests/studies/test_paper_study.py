@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 import curvature
-from curvature import evaluation, paper_study, synthetic
+from curvature import evaluation, synthetic
+from curvature.studies import paper as paper_study
 from curvature.cli import build_parser, main
 
 
