@@ -61,8 +61,8 @@ from ..fitting.scale_selection import KIND_MONGE, multiscale_anchor_fits
 from ..fitting.shifted import adopt_neighbor_fits
 from ..neighborhoods.kdtree import build_tree, knn_parallel
 from ..params import ParamSpec
-from .sampling import cell_ijk, grid_keys, thinned
 from ..status import Status
+from .sampling import cell_ijk, grid_keys, thinned
 
 # Neighbors of the spacing and noise measurements and of the clean-cloud fit.
 PLAN_K = 24

@@ -1,4 +1,11 @@
-"""``curvature.estimate``: neighborhoods, quadric fits and orientation for a whole cloud.
+"""``curvature.estimate``: the one path from points to per-point curvature.
+
+The call is checked (:mod:`~curvature.pipeline.request`), the points put in Z-order
+(:mod:`~curvature.pipeline.spatial_order`) and run as one block through an estimator
+(:mod:`~curvature.pipeline.block`: plan, neighborhoods, fits), or, for big clouds or with an
+executor, as tiles of such blocks with verified halos (:mod:`~curvature.pipeline.tiling`, which
+wraps the block and is never imported back); then normals are oriented and the result is put
+back in input order with the input's attributes (:mod:`~curvature.pipeline.attributes`).
 
 Work goes through the cloud in chunks of query points so memory stays bounded: only one chunk's
 neighborhoods exist at a time, and the outputs are the only per-point arrays kept.
@@ -6,145 +13,40 @@ neighborhoods exist at a time, and the outputs are the only per-point arrays kep
 
 from __future__ import annotations
 
-import os
 import time
 from collections.abc import Callable
-from contextlib import contextmanager
-from dataclasses import dataclass
 
-import numba
 import numpy as np
 
-from .attributes import carry_input, file_viewpoint, orientation_rule
-from ..estimators.auto import AUTO_PARAMS, AutoRun
 from ..cloud import PointCloud
 from ..errors import ParameterError
-from ..fitting import FIT_PARAMS, FITS, fit_neighborhoods, resolve_fit, stage1_normals
-from ..neighborhoods import FINDERS, make_finder
-from ..neighborhoods.kdtree import build_tree, knn_parallel
+from ..estimators.fixed import DEFAULT_CHUNK
+from ..fitting import FITS
 from ..orientation import (
-    ORIENT_K,
     apply_signs,
-    first_neighbors,
     signs_auto,
     signs_from_normals,
     signs_from_viewpoint,
 )
-from ..params import resolve_params
 from ..result import CurvatureResult
-from .spatial_order import inverse_permutation, morton_order
 from ..validation import as_faces, as_points, as_vectors
+from .attributes import carry_input, file_viewpoint, orientation_rule
+from .block import DERIVED, compute_block
+from .request import (
+    DEFAULT_FIT,
+    DEFAULT_METHOD,
+    METHODS,
+    ORIENTATIONS,
+    PRESETS,
+    check_viewpoint,
+    resolve_request,
+    resolve_tile_points,
+)
+from .spatial_order import inverse_permutation, morton_order
+from .threads import numba_threads
+from .tiling import run_tiled
 
-ORIENTATIONS = ("auto", "normals", "viewpoint")
-DEFAULT_METHOD = "auto"
-# Fit of the neighborhood methods when none is named: the implicit quadric where it fits the
-# neighborhood (exact on quadrics), the height function where noise would make the implicit
-# one speckle (real scans); measured in docs/defaults.md.
-DEFAULT_FIT = "adaptive"
-#: Named configurations: ``estimate(points, preset="paper")``.
-PRESETS = {
-    # The paper's own setting: Territory Claiming grown to 10 neighbors from 30 candidates,
-    # implicit quadric.
-    "paper": {"method": "tc", "fit": "implicit", "min_neighbors": 10, "candidates": 30},
-}
-DEFAULT_CHUNK = 32768
-# Clouds above TILE_ABOVE points are processed in tiles of AUTO_TILE_POINTS (tile_points=None):
-# a tile's working set is about 550 bytes per tile point, beside about 200 per cloud point.
-TILE_ABOVE = 2_000_000
-AUTO_TILE_POINTS = 1_000_000
-# Tiles handed to an executor: small enough to spread over a cluster, large enough that the
-# halo (a few spacings around the tile) stays a small share of the work.
-EXECUTOR_TILE_POINTS = 250_000
-MIN_TILE_POINTS = 1000
 ProgressFn = Callable[[int, int], None]
-
-
-def resolve_workers(workers) -> int:
-    """Number of threads to use: ``None`` means every core numba may use."""
-    limit = numba.config.NUMBA_NUM_THREADS
-    if workers is None:
-        return max(1, min(limit, os.cpu_count() or 1))
-    if isinstance(workers, bool) or not isinstance(workers, int | np.integer) or workers < 1:
-        raise ParameterError(f"workers must be a whole number >= 1, got {workers!r}")
-    return int(min(workers, limit))
-
-
-@contextmanager
-def numba_threads(count: int):
-    """Run numba's parallel loops with ``count`` threads, restoring the previous count."""
-    before = numba.get_num_threads()
-    numba.set_num_threads(count)
-    try:
-        yield
-    finally:
-        numba.set_num_threads(before)
-
-
-def resolve_orientation(orientation, normals, viewpoint) -> str:
-    """Pick the orientation mode (DESIGN.md 5) and check that its input is present."""
-    if orientation is None:
-        return "normals" if normals is not None else "viewpoint" if viewpoint is not None \
-            else "auto"
-    if orientation not in ORIENTATIONS:
-        raise ParameterError(
-            f"unknown orientation {orientation!r}; choose one of {list(ORIENTATIONS)}")
-    if orientation == "normals" and normals is None:
-        raise ParameterError("orientation 'normals' needs per-point normals")
-    if orientation == "viewpoint" and viewpoint is None:
-        raise ParameterError("orientation 'viewpoint' needs a viewpoint (x, y, z)")
-    return orientation
-
-
-def check_viewpoint(viewpoint, n: int) -> np.ndarray | None:
-    """A viewpoint as a finite float64 array: shape (3,), or (n, 3) for one per point."""
-    if viewpoint is None:
-        return None
-    try:
-        vp = np.asarray(viewpoint, np.float64)
-    except (TypeError, ValueError):
-        raise ParameterError(f"viewpoint must be three numbers, got {viewpoint!r}") from None
-    if vp.ndim == 2 and vp.shape[1] == 3 and vp.shape[0] != 1:
-        if vp.shape[0] != n:
-            raise ParameterError(f"per-point viewpoints must have shape ({n}, 3) to match "
-                                 f"the {n} points, got {vp.shape}")
-        bad = np.flatnonzero(~np.isfinite(vp).all(axis=1))
-        if bad.size:
-            raise ParameterError(f"the viewpoint of point {int(bad[0])} is not finite")
-        return vp
-    vp = vp.reshape(-1)
-    if vp.shape != (3,) or not np.isfinite(vp).all():
-        raise ParameterError(f"viewpoint must be three finite numbers (or one row per point), "
-                             f"got {viewpoint!r}")
-    return vp
-
-
-def split_params(params: dict) -> tuple[dict, dict]:
-    """Separate fit parameters (solver, include_self) from neighborhood method parameters."""
-    fit_names = {s.name for s in FIT_PARAMS}
-    fit_params = {k: v for k, v in params.items() if k in fit_names}
-    method_params = {k: v for k, v in params.items() if k not in fit_names}
-    return fit_params, method_params
-
-
-def apply_preset(preset, method, fit, params: dict) -> tuple[str, str | None, dict]:
-    """Method, fit and parameters after a named preset; explicit arguments must agree with it.
-
-    Parameters given beside the preset override the preset's own values.
-    """
-    if preset is None:
-        return (DEFAULT_METHOD if method is None else method), fit, params
-    if preset not in PRESETS:
-        raise ParameterError(f"unknown preset {preset!r}; choose one of {sorted(PRESETS)}")
-    conf = dict(PRESETS[preset])
-    p_method, p_fit = conf.pop("method"), conf.pop("fit")
-    for name, given, wanted in (("method", method, p_method), ("fit", fit, p_fit)):
-        if given is not None and given != wanted:
-            raise ParameterError(
-                f"preset {preset!r} uses {name} {wanted!r}; {name} {given!r} contradicts it")
-    return p_method, p_fit, {**conf, **params}
-
-
-METHODS = ("auto", *FINDERS)
 
 
 def estimate(points, method: str | None = None, *, fit: str | None = None, preset=None,
@@ -159,7 +61,8 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
         Coordinates. A PointCloud also supplies normals and faces unless given here.
     method : {"auto", "knn", "tc", "egg", "mesh"}, optional
         "auto" (the default) measures the cloud's noise and spacing and picks model and scale
-        itself (:mod:`curvature.estimators.auto`; parameters ``k``, ``normal_k``, ``noise_threshold``).
+        itself (:mod:`curvature.estimators.auto`; parameters ``k``, ``normal_k``,
+        ``noise_threshold``).
         The others are the neighborhood methods of DESIGN.md 4.1-4.4; their parameters go in
         ``**params``.
     fit : {"adaptive", "implicit", "monge", "nfr"}, optional
@@ -193,9 +96,9 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
         Query points per chunk.
     tile_points : int, optional
         Split the cloud into spatial tiles of about this many points, each computed with a
-        halo that is checked to hold everything its points depend on (:mod:`curvature.pipeline.tiling`);
-        results are identical to an untiled run. Default: tiles of 1M points above 2M points
-        (250k with an ``executor``); 0 never tiles.
+        halo that is checked to hold everything its points depend on
+        (:mod:`curvature.pipeline.tiling`); results are identical to an untiled run. Default:
+        tiles of 1M points above 2M points (250k with an ``executor``); 0 never tiles.
     executor : object, optional
         Where tiles are computed: anything whose ``submit(fn, arg)`` returns a future with
         ``result()``, ``cancel()`` and ``add_done_callback()`` (a
@@ -255,8 +158,6 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
             block = compute_block(spts, s_faces, req, progress=progress)
             res, graph, info, timings = block.result, block.graph, block.info, block.timings
         else:
-            from .tiling import run_tiled
-
             res, graph, info, timings = run_tiled(spts, s_faces, req, tiles, progress,
                                                   executor)
         t0 = time.perf_counter()
@@ -277,242 +178,6 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
     if vp is not None and vp.ndim == 1:
         res.info["viewpoint"] = vp.tolist()
     return res if cloud is None else carry_input(res, cloud)
-
-
-@dataclass(frozen=True)
-class Request:
-    """Everything ``estimate`` was asked for, checked (picklable: tiles travel with it)."""
-
-    method: str
-    fit: str | None
-    fit_opts: dict
-    method_params: dict
-    auto_params: dict
-    mode: str
-    workers: int
-    chunk_size: int
-
-
-def resolve_request(preset, method, fit, params, orientation, ref_normals, viewpoint, workers,
-                    chunk_size) -> Request:
-    """Check method, fit, parameters, orientation, workers and chunk size."""
-    method, fit, params = apply_preset(preset, method, fit, params)
-    if method not in METHODS:
-        raise ParameterError(f"unknown method {method!r}; choose one of {sorted(METHODS)}")
-    mode = resolve_orientation(orientation, ref_normals, viewpoint)
-    fit_opts, method_params, auto_params = {}, {}, {}
-    if method == "auto":
-        if fit is not None:
-            raise ParameterError(
-                f"method 'auto' chooses its own fit; fit {fit!r} needs a neighborhood method "
-                f"({', '.join(sorted(FINDERS))})")
-        auto_params = resolve_params(AUTO_PARAMS, params, "method 'auto'")
-    else:
-        fit = DEFAULT_FIT if fit is None else fit
-        fit_params, method_params = split_params(params)
-        fit_opts = resolve_fit(fit, fit_params)
-    nthreads = resolve_workers(workers)
-    if isinstance(chunk_size, bool) or not isinstance(chunk_size, int) or chunk_size < 1:
-        raise ParameterError(f"chunk_size must be a whole number >= 1, got {chunk_size!r}")
-    return Request(method, fit, fit_opts, method_params, auto_params, mode, nthreads,
-                   chunk_size)
-
-
-def resolve_tile_points(tile_points, n: int, executor: bool = False) -> int | None:
-    """Core points per tile, or None to run the cloud as one block.
-
-    ``None`` tiles clouds larger than :data:`TILE_ABOVE`; 0 never tiles. With an
-    executor the cloud is always tiled, by default in tiles of :data:`EXECUTOR_TILE_POINTS`
-    (0: one tile).
-    """
-    if tile_points is not None and (
-            isinstance(tile_points, bool) or not isinstance(tile_points, int | np.integer)
-            or tile_points < 0):
-        raise ParameterError(f"tile_points must be a whole number >= 0, got {tile_points!r}")
-    if executor:
-        size = EXECUTOR_TILE_POINTS if tile_points is None else int(tile_points) or n
-        return max(min(size, n), min(MIN_TILE_POINTS, n))
-    if tile_points is None:
-        return AUTO_TILE_POINTS if n > TILE_ABOVE else None
-    if tile_points == 0 or tile_points >= n:
-        return None
-    return max(int(tile_points), MIN_TILE_POINTS)
-
-
-@dataclass
-class Block:
-    """Results of :func:`compute_block` for its query points (rows in query order).
-
-    Attributes
-    ----------
-    result : CurvatureResult
-        Unoriented curvature of the query points (mean and gaussian not yet filled).
-    graph : ndarray, shape (m, ORIENT_K), int32, or None
-        First neighbors of each query point (block indices), for orientation "auto".
-    reach : ndarray, shape (m,), or None
-        With ``track_reach``: a distance from each query point within which lies every point
-        its result depends on.
-    info, timings : dict
-    """
-
-    result: CurvatureResult
-    graph: np.ndarray | None
-    reach: np.ndarray | None
-    info: dict
-    timings: dict
-
-
-def compute_block(spts, s_faces, req: Request, query=None, *, progress=None, plan=None,
-                  mesh_graph=None, track_reach: bool = False) -> Block:
-    """Unoriented curvature of ``query`` points of a Z-ordered block of points.
-
-    Parameters
-    ----------
-    spts : ndarray, shape (n, 3)
-        The block's points (a whole cloud, or a tile with its halo), in Z-order.
-    s_faces : ndarray, shape (f, 3), optional
-        Faces in block indices.
-    req : Request
-    query : ndarray, shape (m,), int64, optional
-        Block indices to compute (default: all, in order).
-    progress : callable, optional
-    plan : AutoPlan, optional
-        The whole cloud's plan for method "auto" (measured on the block if not given).
-    mesh_graph : tuple of ndarray, optional
-        The whole cloud's vertex graph restricted to the block, for method "mesh".
-    track_reach : bool
-        Also return each query point's reach (see :class:`Block`).
-    """
-    n = spts.shape[0]
-    query = np.arange(n, dtype=np.int64) if query is None else np.asarray(query, np.int64)
-    want_graph = req.mode == "auto"
-    timings: dict = {}
-    if req.method == "auto":
-        res = empty_result(spts, s_faces)
-        graph = np.empty((n, ORIENT_K), np.int32) if want_graph else None
-        run = AutoRun(spts, req.auto_params, req.chunk_size, progress, plan=plan,
-                      track_reach=track_reach)
-        run.run(res, graph, ORIENT_K)
-        timings.update(run.timings)
-        info = {"method": "auto", "params": req.auto_params,
-                "fit": "implicit" if run.plan.clean else "nfr", "plan": run.plan.to_dict()}
-        if query.shape[0] != n or np.any(query != np.arange(n)):
-            res = select_rows(res, query, spts[query])
-            graph = None if graph is None else graph[query]
-        reach = None if run.reach is None else run.reach[query]
-        return Block(res, graph, reach, info, timings)
-    finder = make_finder(spts, req.method, faces=s_faces, **req.method_params)
-    if mesh_graph is not None:
-        finder.use_graph(mesh_graph)
-    res = empty_result(spts[query], None)
-    graph = np.empty((query.shape[0], ORIENT_K), np.int32) if want_graph else None
-    reach = fit_chunks(spts, finder, res, graph, req.fit, req.fit_opts, req.workers,
-                       req.chunk_size, progress, timings, query, track_reach)
-    res.faces = s_faces if query.shape[0] == n else None
-    info = {"method": req.method, "params": dict(finder.params), "fit": req.fit,
-            **req.fit_opts}
-    return Block(res, graph, reach, info, timings)
-
-
-def select_rows(res: CurvatureResult, rows: np.ndarray, points: np.ndarray) -> CurvatureResult:
-    """The result restricted to ``rows``."""
-    return CurvatureResult(points=points, faces=None,
-                           **{name: arr[rows] for name, arr in res.fields().items()})
-
-
-def fit_chunks(spts, finder, res, graph, fit, fit_opts, nthreads, chunk_size, progress,
-               timings, query=None, track_reach: bool = False):
-    """Neighborhoods and fits of a neighborhood method, chunk by chunk, into ``res``.
-
-    ``res`` and ``graph`` rows follow ``query`` (default: every point). Returns each query
-    point's reach when ``track_reach`` (else None).
-    """
-    n = spts.shape[0]
-    query = np.arange(n, dtype=np.int64) if query is None else query
-    m = query.shape[0]
-    stage1 = stage1_radius = None
-    reach = np.empty(m) if track_reach else None
-    timings.update(neighbors=0.0, fit=0.0)
-    extra_k = finder.examined() if track_reach else 0
-    # one tree for every reach distance of this block
-    tree = build_tree(spts) if track_reach and (extra_k or fit == "nfr") else None
-    if fit == "nfr":
-        t0 = time.perf_counter()
-        stage1 = stage1_normals(spts, make_finder(spts, "knn", k=fit_opts["normal_k"]),
-                                chunk_size, nthreads)
-        if track_reach:
-            stage1_radius = kth_distance(spts, fit_opts["normal_k"], tree=tree)
-        timings["stage1_normals"] = time.perf_counter() - t0
-    for start in range(0, m, chunk_size):
-        stop = min(start + chunk_size, m)
-        q = query[start:stop]
-        t0 = time.perf_counter()
-        nbhd = finder.query(q, workers=nthreads)
-        t1 = time.perf_counter()
-        out = fit_neighborhoods(spts, q, nbhd, fit, fit_opts["solver"],
-                                fit_opts["include_self"], stage1, fit_opts["clean_residual"])
-        timings["neighbors"] += t1 - t0
-        timings["fit"] += time.perf_counter() - t1
-        sl = slice(start, stop)
-        res.k1[sl], res.k2[sl], res.residual[sl], res.status[sl] = \
-            out.k1, out.k2, out.residual, out.status
-        res.normals[sl], res.dir1[sl], res.dir2[sl] = out.normals, out.dir1, out.dir2
-        res.neighbor_count[sl] = nbhd.sizes()
-        if graph is not None:
-            graph[sl] = first_neighbors(nbhd)
-        if reach is not None:
-            reach[sl] = neighborhood_reach(spts, q, nbhd, stage1_radius)
-            if extra_k:  # candidate-based methods examine more points than they keep
-                reach[sl] = np.maximum(reach[sl], kth_distance(spts, extra_k, q, tree))
-        if progress is not None:
-            progress(stop, m)
-    return reach
-
-
-def kth_distance(points: np.ndarray, k: int, query=None, tree=None) -> np.ndarray:
-    """Distance of each query point (default: all) to its k-th nearest other point."""
-    n = points.shape[0]
-    query = np.arange(n, dtype=np.int64) if query is None else query
-    k = min(k, n - 1)
-    tree = build_tree(points) if tree is None else tree
-    out = np.empty(query.shape[0])
-    for start in range(0, query.shape[0], DEFAULT_CHUNK):
-        q = query[start:start + DEFAULT_CHUNK]
-        nbr = np.empty((q.shape[0], k), np.int32)
-        d2 = np.empty((q.shape[0], k))
-        knn_parallel(points, tree, q, k, nbr, d2)
-        out[start:start + q.shape[0]] = np.sqrt(d2[:, -1])
-    return out
-
-
-def neighborhood_reach(points, query, nbhd, radius=None) -> np.ndarray:
-    """Largest distance from each query point to a neighbor (plus the neighbor's own
-    ``radius`` when given, and the query point's)."""
-    sizes = nbhd.sizes()
-    rows = np.repeat(np.arange(query.shape[0]), sizes)
-    d = np.linalg.norm(points[nbhd.indices] - points[query[rows]], axis=1)
-    if radius is not None:
-        d += radius[nbhd.indices]
-    out = np.zeros(query.shape[0])
-    np.maximum.at(out, rows, d)
-    if radius is not None:
-        out = np.maximum(out, radius[query])
-    return out
-
-
-# Result fields computed from k1 and k2 at the very end (never written before, so their pages
-# cost no memory while a big cloud is computed).
-DERIVED = ("mean", "gaussian")
-
-
-def empty_result(pts: np.ndarray, faces) -> CurvatureResult:
-    """A result with every output array allocated (filled by the chunks)."""
-    n = pts.shape[0]
-    return CurvatureResult(
-        points=pts, k1=np.empty(n), k2=np.empty(n), mean=np.empty(n), gaussian=np.empty(n),
-        normals=np.empty((n, 3)), dir1=np.empty((n, 3)), dir2=np.empty((n, 3)),
-        neighbor_count=np.empty(n, np.int32), status=np.empty(n, np.int8),
-        residual=np.empty(n), faces=faces)
 
 
 def unpermute(res: CurvatureResult, inv: np.ndarray, pts: np.ndarray, faces) -> CurvatureResult:
@@ -545,4 +210,5 @@ def orient(res: CurvatureResult, mode: str, ref_normals, viewpoint, graph) -> No
     apply_signs(signs, res.k1, res.k2, res.normals, res.dir1, res.dir2)
 
 
-__all__ = ["FITS", "METHODS", "ORIENTATIONS", "PRESETS", "estimate"]
+__all__ = ["DEFAULT_FIT", "DEFAULT_METHOD", "FITS", "METHODS", "ORIENTATIONS", "PRESETS",
+           "estimate"]
