@@ -10,8 +10,8 @@ import pytest
 
 import curvature
 from curvature import evaluation, synthetic
-from curvature.studies import paper as paper_study
 from curvature.cli import build_parser, main
+from curvature.studies import paper as paper_study
 
 
 @dataclass

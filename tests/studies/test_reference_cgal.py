@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from curvature import synthetic
-from curvature.studies.peers import cgal as reference_cgal
 from curvature.errors import CurvatureInputError, ParameterError
+from curvature.studies.peers import cgal as reference_cgal
 from curvature.studies.peers.cgal import (
     CgalBuildError,
     build_cgal_jet,
