@@ -16,6 +16,7 @@ remaining finding is not a defect.
 from __future__ import annotations
 
 import argparse
+import importlib.util
 import os
 import re
 import secrets
@@ -25,8 +26,21 @@ import tempfile
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO / "benchmarks"))
-from load import free_port, wait_ready  # noqa: E402
+
+
+def _load_benchmark_helpers():
+    """benchmarks/load.py as a private module. Putting benchmarks/ on sys.path instead would
+    let its service.py shadow the service package in every process started afterwards (a
+    test importing this script broke the test session's worker pools that way)."""
+    spec = importlib.util.spec_from_file_location("_api_fuzz_load",
+                                                  REPO / "benchmarks" / "load.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+_load = _load_benchmark_helpers()
+free_port, wait_ready = _load.free_port, _load.wait_ready
 
 # Checks switched off, each with its reason in docs/reliability.md ("API fuzzing").
 EXCLUDED: tuple[str, ...] = ()
