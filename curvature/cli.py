@@ -173,6 +173,12 @@ def percentiles(values: np.ndarray) -> str:
     return "  ".join(f"p{q}={v:.4g}" for q, v in zip((5, 25, 50, 75, 95), p, strict=True))
 
 
+def median_std(values: np.ndarray) -> str:
+    """The median of the finite standard errors, or n/a."""
+    finite = values[np.isfinite(values)]
+    return f"{np.median(finite):.4g}" if finite.size else "n/a"
+
+
 def cmd_estimate(args) -> int:
     if args.preview:  # fail before a long estimate, not after it
         try:
@@ -220,6 +226,9 @@ def cmd_estimate(args) -> int:
             f"failures    {failed if failed else 'none'}",
             f"k1          {percentiles(res.k1)}",
             f"k2          {percentiles(res.k2)}",
+            f"std         median standard error k1 {median_std(res.k1_std)}  "
+            f"k2 {median_std(res.k2_std)}  H {median_std(res.mean_std)};  uncertain "
+            f"{int(res.uncertain.sum())} ({res.uncertain.mean():.2%})",
             f"time        read {t_read:.2f}s  estimate {t_est:.2f}s  write {t_write:.2f}s  "
             f"({n / max(t_est, 1e-9):,.0f} points/s)",
             f"output      {args.output}",

@@ -27,6 +27,9 @@ FIELDS: dict[str, str] = {
     "gaussian": "Gaussian curvature K",
     "k1": "principal curvature k1",
     "k2": "principal curvature k2",
+    "k1_std": "standard error of k1",
+    "k2_std": "standard error of k2",
+    "mean_std": "standard error of H",
 }
 # Camera presets in the world frame (right, forward, up) of the chosen up axis: (direction
 # from the cloud towards the camera, screen up). With z up: right = x and forward = y.

@@ -8,9 +8,11 @@ import numpy as np
 
 from .status import STATUS_NAMES
 
-SCALAR_FIELDS = ("k1", "k2", "mean", "gaussian", "residual")
+SCALAR_FIELDS = ("k1", "k2", "mean", "gaussian", "residual", "k1_std", "k2_std", "mean_std")
 VECTOR_FIELDS = ("normals", "dir1", "dir2")
-INT_FIELDS = ("neighbor_count", "status")
+INT_FIELDS = ("neighbor_count", "status", "uncertain")
+#: Standard errors, optional when a result is built (NaN when unknown, e.g. an older file).
+STD_FIELDS = ("k1_std", "k2_std", "mean_std")
 
 
 def shape_index(k1: np.ndarray, k2: np.ndarray) -> np.ndarray:
@@ -68,6 +70,13 @@ class CurvatureResult:
         0 ok, 1 too few neighbors, 2 degenerate fit, 3 no foot point, 4 non-finite result.
     residual : ndarray, shape (n,), float64
         RMS distance of the fitted points to the fitted surface (first-order distance).
+    k1_std, k2_std, mean_std : ndarray, shape (n,), float64
+        Standard errors of k1, k2 and H, in their unit, from the fit that produced them
+        (:mod:`curvature.uncertainty`). NaN where ``status != 0``.
+    uncertain : ndarray, shape (n,), uint8
+        1 where the estimate is not to be trusted (:func:`curvature.uncertainty.uncertain`:
+        a standard error above a share of the curvature, a thin neighborhood, or no estimate
+        at all), else 0.
     faces : ndarray, shape (m, 3), int64, or None
         Input faces, kept so a result PLY keeps the mesh.
     info : dict
@@ -89,9 +98,21 @@ class CurvatureResult:
     neighbor_count: np.ndarray
     status: np.ndarray
     residual: np.ndarray
+    k1_std: np.ndarray | None = None
+    k2_std: np.ndarray | None = None
+    mean_std: np.ndarray | None = None
+    uncertain: np.ndarray | None = None
     faces: np.ndarray | None = None
     info: dict = field(default_factory=dict)
     attributes: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def __post_init__(self):
+        n = np.shape(self.k1)[0]
+        for name in STD_FIELDS:
+            if getattr(self, name) is None:
+                setattr(self, name, np.full(n, np.nan))
+        if self.uncertain is None:
+            self.uncertain = (np.asarray(self.status) != 0).astype(np.uint8)
 
     def __len__(self) -> int:
         return int(self.points.shape[0])

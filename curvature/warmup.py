@@ -102,6 +102,22 @@ def _compressed_pcd(points: np.ndarray) -> bytes:
     return header + np.array([len(packed), len(raw)], "<u4").tobytes() + packed
 
 
+def _anchor_fits_once(cloud) -> None:
+    """``nfr_anchor_fits`` on a few anchors: the default now fits every anchor through the
+    scale selection (an empty ladder when ``scale_gamma`` is 0), the tests still call it."""
+    from .fitting.normal_field import N_TERMS, nfr_anchor_fits
+    from .fitting.normal_quadric import N_QUAD
+
+    pts, k = cloud.points, 24
+    anchors = np.arange(0, 200, 10, dtype=np.int64)
+    a = anchors.shape[0]
+    nbr = knn_rows(pts, build_tree(pts), anchors, k + 1)[0][:, 1:].astype(np.int32)
+    nfr_anchor_fits(pts, cloud.normals, anchors, np.arange(0, (a + 1) * k, k, dtype=np.int64),
+                    nbr.ravel(), 0.7, np.empty((a, 2, N_TERMS)), np.empty(a),
+                    np.empty((a, 3, 3)), np.empty((a, N_QUAD)), np.empty(a),
+                    np.empty(a, np.int8), np.empty(a), np.empty(a, np.int8))
+
+
 def steps() -> Iterator[Step]:
     """Every run the warm-up makes, as ``(label, call)``."""
     clean = synthetic.torus(1500, seed=1)
@@ -139,6 +155,7 @@ def steps() -> Iterator[Step]:
                                                      np.arange(10, dtype=np.int64), 5)
     yield "read compressed pcd", lambda: read_bytes(_compressed_pcd(clean.points[:100]), "pcd")
     yield "lzf", lambda: lzf_decompress(_literal_lzf(b"warm-up"), 7)
+    yield "anchored fits without scale selection", lambda: _anchor_fits_once(noisy)
 
 
 def kernels() -> Iterator[tuple[str, object]]:

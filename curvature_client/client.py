@@ -27,7 +27,7 @@ from .progress import JobProgressBar
 
 DEFAULT_URL = "http://127.0.0.1:8000"
 RESULT_FORMATS = ("json", "ply", "csv", "npz")
-PREVIEW_FIELDS = ("mean", "gaussian", "k1", "k2")
+PREVIEW_FIELDS = ("mean", "gaussian", "k1", "k2", "k1_std", "k2_std", "mean_std")
 PREVIEW_VIEWS = ("iso", "front", "side", "top")
 PREVIEW_UP_CHOICES = ("auto", "x", "-x", "y", "-y", "z", "-z")
 # While waiting, a service that is briefly unreachable or not ready (restart) is retried for

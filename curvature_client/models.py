@@ -51,9 +51,10 @@ class RemoteResult(dict):
     """The arrays of a job's result (its NPZ), by name, also readable as attributes.
 
     Keys as the service writes them: ``points`` (n, 3), ``normals``, ``dir1``, ``dir2``
-    (n, 3) float64; ``k1``, ``k2``, ``mean``, ``gaussian``, ``residual`` (n,) float64 with NaN
-    where ``status != 0``; ``neighbor_count``, ``status`` (n,) integers; ``faces`` (m, 3) when
-    the input was a mesh.
+    (n, 3) float64; ``k1``, ``k2``, ``mean``, ``gaussian``, ``residual`` and the standard
+    errors ``k1_std``, ``k2_std``, ``mean_std`` (n,) float64 with NaN where ``status != 0``;
+    ``neighbor_count``, ``status``, ``uncertain`` (n,) integers; ``faces`` (m, 3) when the
+    input was a mesh.
     """
 
     def __getattr__(self, name: str) -> np.ndarray:

@@ -51,7 +51,6 @@ from ..fitting import scale_selection
 from ..fitting.kernels import FIT_IMPLICIT, FIT_MONGE, SOLVER_TAUBIN, fit_batch
 from ..fitting.normal_field import (
     N_TERMS,
-    nfr_anchor_fits,
     nfr_from_anchors,
     pca_normals,
 )
@@ -62,6 +61,7 @@ from ..fitting.shifted import adopt_neighbor_fits
 from ..neighborhoods.kdtree import build_tree, knn_parallel
 from ..params import ParamSpec
 from ..status import Status
+from ..uncertainty import ANCHORED_MEAN_SHARE, CLEAN_CALIBRATION, with_floor
 from .sampling import cell_ijk, grid_keys, thinned
 
 # Neighbors of the spacing and noise measurements and of the clean-cloud fit.
@@ -376,6 +376,8 @@ class AutoRun:
         self.track_reach = track_reach
         self.reach: np.ndarray | None = None
         self.outliers = np.zeros(points.shape[0], bool)
+        # RMS neighbor distance of each clean fit (its standard error's unit)
+        self.clean_h = np.empty(points.shape[0]) if self.plan.clean else None
 
     def run(self, res, graph, orient_k: int) -> None:
         """Fill every output array of ``res`` and the orientation graph (n, orient_k)."""
@@ -410,6 +412,7 @@ class AutoRun:
             self.timings["adopt"] = time.perf_counter() - t0
             if self.track_reach:
                 self.reach = reach
+            self._clean_std(res)
             failed = np.flatnonzero(res.status != Status.OK)
             if failed.size:  # rare: an implicit fit failed; its cell anchor's field takes over
                 self._fallback(res, field, radius[0], reps, owner, max(kc // 2, 12), failed)
@@ -527,6 +530,7 @@ class AutoRun:
         count = res.neighbor_count[sl]
         h = np.sqrt(np.take_along_axis(np.cumsum(d2, axis=1), count[:, None] - 1,
                                        axis=1)[:, 0] / count)
+        self.clean_h[sl] = h
         curv = np.maximum(np.abs(res.k1[sl]), np.abs(res.k2[sl]))
         loose = np.flatnonzero(curv * h > CLEAN_SUPPORT)
         if loose.size:
@@ -537,16 +541,26 @@ class AutoRun:
                 arr[rows] = np.nan
             res.status[rows] = Status.DEGENERATE_FIT
 
+    def _clean_std(self, res) -> None:
+        """Standard errors of the clean fits: the model error their residual implies."""
+        with np.errstate(invalid="ignore", divide="ignore"):
+            std = CLEAN_CALIBRATION * res.residual / self.clean_h ** 2
+        std = with_floor(np.where(res.status == Status.OK, std, np.nan), res.k1, res.k2,
+                         1.0 / self.plan.spacing)
+        res.k1_std[:] = std
+        res.k2_std[:] = std
+        res.mean_std[:] = std
+
     def _anchored(self, res, field, r_normal, reps, owner, kc) -> None:
         """Two passes of anchored normal fits over ``kc`` neighbors of every anchor, read at
         every point."""
-        fits, fit_reach, chosen = self._model(field, r_normal, reps, owner, kc)
+        fits, fit_reach, chosen, err = self._model(field, r_normal, reps, owner, kc)
         query = np.arange(self.points.shape[0], dtype=np.int64)
         t0 = time.perf_counter()
         for sl in self._chunks(query.shape[0]):
-            out = _OutputView(res, query[sl])
+            out = _OutputView(res, query[sl], 1.0 / self.plan.spacing)
             nfr_from_anchors(self.points, query[sl], owner[sl], reps, *fits, *out.arrays)
-            out.store(chosen[owner[sl]])
+            out.store(chosen[owner[sl]], err[owner[sl]])
             self._tick(sl.stop - sl.start)
         self.timings["pass2"] += time.perf_counter() - t0
         if self.track_reach:
@@ -582,8 +596,8 @@ class AutoRun:
             self._tick(sl.stop - sl.start)
         reps, owner = grid_cells(sub, np.asarray(inner.plan.origin), inner.plan.cell)
         self._total += 2 * reps.shape[0]
-        fits, fit_reach, chosen = inner._model(field, r_normal, reps, owner,
-                                               min(inner.fit_k(), ns - 1))
+        fits, fit_reach, chosen, err = inner._model(field, r_normal, reps, owner,
+                                                    min(inner.fit_k(), ns - 1))
         for name, sec in inner.timings.items():
             self.timings[f"dense {name}"] = sec
         t0 = time.perf_counter()
@@ -594,10 +608,11 @@ class AutoRun:
         both = np.concatenate([sub, self.points])
         for sl in self._chunks(n):
             query = np.arange(sl.start, sl.stop, dtype=np.int64)
-            out = _OutputView(res, query)
+            out = _OutputView(res, query, 1.0 / self.plan.spacing)
             nfr_from_anchors(both, ns + query, anchor_of[sl], reps, *fits, *out.arrays)
             # A kept fit over s thinned points spans the patch of s / share points.
-            out.store(np.rint(chosen[anchor_of[sl]] / share).astype(np.int64))
+            out.store(np.rint(chosen[anchor_of[sl]] / share).astype(np.int64),
+                      err[anchor_of[sl]])
             self._tick(sl.stop - sl.start)
         self.timings["dense read"] = time.perf_counter() - t0
         if self.track_reach:
@@ -608,7 +623,8 @@ class AutoRun:
 
     def _model(self, field, r_normal, reps, owner, kc):
         """The anchors' fits of both passes: the first refines the normals, the second fits
-        them; returns the second pass's fits, their reach and sizes (:meth:`_fit_anchors`)."""
+        them; returns the second pass's fits, their reach, sizes and standard errors
+        (:meth:`_fit_anchors`)."""
         # How far the first pass's normal of each point depends on: its anchor's fit reads
         # stage-1 normals of the anchor's neighbors, each made from their own neighbors.
         w = r_normal
@@ -616,7 +632,8 @@ class AutoRun:
             t0 = time.perf_counter()
             # Pass 1 only refines normals: Monge rungs would tilt them by their noisy curvature
             # over a cell's width, so its ladder has the normal-fit rungs only.
-            fits, fit_reach, chosen = self._fit_anchors(reps, field, kc, w, positional=last)
+            fits, fit_reach, chosen, err = self._fit_anchors(reps, field, kc, w,
+                                                             positional=last)
             if not last:
                 # Refined normals of every point: the first pass's field at the point; the
                 # outliers stay out (a normal given at an off-surface position would bend
@@ -627,7 +644,7 @@ class AutoRun:
                     w = self._point_reach(reps, owner, fit_reach)
             name = "pass2" if last else "pass1"
             self.timings[name] = self.timings.get(name, 0.0) + time.perf_counter() - t0
-        return fits, fit_reach, chosen
+        return fits, fit_reach, chosen, err
 
     def _fallback(self, res, field, r_normal, reps, owner, k, failed) -> None:
         """One anchored pass over ``k`` neighbors on the stage-1 normals, for failed points.
@@ -638,12 +655,12 @@ class AutoRun:
         used = np.unique(owner[failed])
         local = np.full(reps.shape[0], -1, np.int64)
         local[used] = np.arange(used.shape[0])
-        fits, fit_reach, chosen = self._fit_anchors(
+        fits, fit_reach, chosen, err = self._fit_anchors(
             reps[used], field, min(k, self.points.shape[0] - 1), r_normal)
-        out = _OutputView(res, failed.astype(np.int64))
+        out = _OutputView(res, failed.astype(np.int64), 1.0 / self.plan.spacing)
         nfr_from_anchors(self.points, failed.astype(np.int64), local[owner[failed]], reps[used],
                          *fits, *out.arrays)
-        out.store(chosen[local[owner[failed]]])
+        out.store(chosen[local[owner[failed]]], err[local[owner[failed]]])
         if self.track_reach:
             full = np.zeros(reps.shape[0])
             full[used] = fit_reach
@@ -669,6 +686,9 @@ class AutoRun:
             ``k`` neighbors q (the chosen fit uses a subset of them).
         chosen : ndarray, shape (a,), int64
             Neighbors of each anchor's kept fit.
+        err : ndarray, shape (a,)
+            Standard error of the kept fit's k1 and k2: its calibrated noise error and the
+            bias the smaller fits show, combined (inf where no fit was usable).
         """
         a = anchors.shape[0]
         coef = np.empty((a, 2, N_TERMS))
@@ -679,13 +699,15 @@ class AutoRun:
         status = np.empty(a, np.int8)
         reach = np.empty(a) if self.track_reach else None
         chosen = np.full(a, k, np.int64)
-        sigma = np.empty(a)
+        sigma, bias = np.empty(a), np.empty(a)
         gamma = self.params["scale_gamma"]
         kinds = np.asarray(scale_selection.DEFAULT_KINDS, np.int64)
         rungs = np.flatnonzero((kinds != KIND_MONGE) | positional)
         ladder = np.asarray(scale_selection.DEFAULT_LADDER, np.int64)[rungs]
         calib = np.asarray(scale_selection.CALIBRATION, np.float64)[np.append(rungs, len(kinds))]
         kinds = kinds[rungs]
+        if gamma == 0.0:  # no ladder: every anchor keeps its fit over k neighbors
+            ladder, kinds, calib = ladder[:0], kinds[:0], calib[-1:]
         # Neighbor lists are k long: chunk by neighbor entries, not anchors, so a chunk holds
         # as many entries as a chunk of 24-neighbor queries would.
         step = max(64, self.chunk_size * 24 // max(k, 24))
@@ -693,19 +715,16 @@ class AutoRun:
             indptr, indices, d2 = knn_csr(self.points, self.tree, anchors[sl], k)
             arrays = (coef[sl], scale[sl], frame[sl], quad[sl], quad_scale[sl], model[sl],
                       resid[sl], status[sl])
-            if gamma > 0.0:
-                multiscale_anchor_fits(self.points, field, anchors[sl], indptr, indices,
-                                       self.params["nfr_ratio"], ladder, kinds, gamma,
-                                       scale_selection.SIGMA_GROWTH, calib,
-                                       *arrays, chosen[sl], sigma[sl])
-            else:
-                nfr_anchor_fits(self.points, field, anchors[sl], indptr, indices,
-                                self.params["nfr_ratio"], *arrays)
+            multiscale_anchor_fits(self.points, field, anchors[sl], indptr, indices,
+                                   self.params["nfr_ratio"], ladder, kinds, gamma,
+                                   scale_selection.SIGMA_GROWTH, calib,
+                                   *arrays, chosen[sl], sigma[sl], bias[sl])
             if reach is not None:
                 nbr = indices.reshape(-1, k)
                 reach[sl] = np.maximum((np.sqrt(d2) + w[nbr]).max(axis=1), w[anchors[sl]])
             self._tick(sl.stop - sl.start)
-        return (coef, scale, frame, quad, quad_scale, model, resid, status), reach, chosen
+        err = np.hypot(sigma, bias)
+        return (coef, scale, frame, quad, quad_scale, model, resid, status), reach, chosen, err
 
     def _refined_field(self, field, anchors, owner, fits):
         """First-pass normals at every point, computed in chunks (``field`` where failed)."""
@@ -738,20 +757,29 @@ def _outputs(res, sl: slice) -> tuple:
 class _OutputView:
     """Scratch outputs for scattered query rows, copied into the result by :meth:`store`."""
 
-    def __init__(self, res, rows: np.ndarray):
+    def __init__(self, res, rows: np.ndarray, floor_scale: float = 0.0):
         m = rows.shape[0]
         self.res = res
+        self.floor_scale = floor_scale  # 1 / spacing: the rounding floor of the errors
         self.rows = rows
         self.arrays = (np.empty(m), np.empty(m), np.empty((m, 3)), np.empty((m, 3)),
                        np.empty((m, 3)), np.empty(m), np.empty(m, np.int8))
 
-    def store(self, neighbor_count: int) -> None:
+    def store(self, neighbor_count, std=None) -> None:
+        """Copy the rows into the result; ``std`` (m,) is the standard error of their k1 and
+        k2 (the rows keep theirs when not given)."""
         r = self.rows
         k1, k2, normals, dir1, dir2, residual, status = self.arrays
         self.res.k1[r], self.res.k2[r], self.res.residual[r], self.res.status[r] = \
             k1, k2, residual, status
         self.res.normals[r], self.res.dir1[r], self.res.dir2[r] = normals, dir1, dir2
         self.res.neighbor_count[r] = neighbor_count
+        if std is not None:
+            std = with_floor(np.where(status == Status.OK, std, np.nan), k1, k2,
+                             self.floor_scale)
+            self.res.k1_std[r] = std
+            self.res.k2_std[r] = std
+            self.res.mean_std[r] = ANCHORED_MEAN_SHARE * std
 
 
 __all__ = ["AUTO_PARAMS", "AutoPlan", "AutoRun", "grid_cells", "plan_auto"]

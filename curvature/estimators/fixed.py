@@ -9,9 +9,11 @@ import time
 import numpy as np
 
 from ..fitting import fit_neighborhoods, stage1_normals
+from ..fitting.uncertainty import design_std
 from ..neighborhoods import make_finder
 from ..neighborhoods.kdtree import build_tree, knn_parallel
 from ..orientation import first_neighbors
+from ..uncertainty import FIT_CALIBRATION, with_floor
 
 # Query points per chunk (``estimate``'s default chunk_size): one chunk's neighborhoods exist
 # at a time.
@@ -56,6 +58,13 @@ def fit_chunks(spts, finder, res, graph, fit, fit_opts, nthreads, chunk_size, pr
             out.k1, out.k2, out.residual, out.status
         res.normals[sl], res.dir1[sl], res.dir2[sl] = out.normals, out.dir1, out.dir2
         res.neighbor_count[sl] = nbhd.sizes()
+        t1 = time.perf_counter()
+        design_std(spts, q, nbhd.indptr, nbhd.indices, bool(fit_opts["include_self"]),
+                   out.dir1, out.dir2, out.residual, out.status, FIT_CALIBRATION[fit],
+                   res.k1_std[sl], res.k2_std[sl], res.mean_std[sl])
+        for name in ("k1_std", "k2_std", "mean_std"):
+            getattr(res, name)[sl] = with_floor(getattr(res, name)[sl], out.k1, out.k2)
+        timings["std"] = timings.get("std", 0.0) + time.perf_counter() - t1
         if graph is not None:
             graph[sl] = first_neighbors(nbhd)
         if reach is not None:

@@ -62,6 +62,9 @@ DEFAULT_GAMMA = 5.0
 CALIBRATION = (7.0, 5.8, 1.9, 2.6, 4.4)
 #: A fit whose sigma exceeds the smallest sigma below it by more than this is turned down.
 SIGMA_GROWTH = 2.0
+#: A kept fit's curvature farther than this many combined standard errors from a smaller
+#: fit's shows a bias of the kept fit: the excess is its estimate (``bias`` output).
+BIAS_SLACK = 1.5
 #: Relative floor of sigma (times 1 / h): noise-free fits are exact only up to rounding.
 SIGMA_FLOOR = 1e-7
 # A foot point farther than this many fit units from the anchor means the fit missed it.
@@ -185,10 +188,23 @@ def _lepski(est, sg, gamma, growth):
     return -1
 
 
+@njit(cache=True)
+def _bias(est, sg, best):
+    """Disagreement of fit ``best`` with the smaller usable fits beyond their errors."""
+    out = 0.0
+    for r in range(best):
+        if not np.isfinite(sg[r]):
+            continue
+        slack = BIAS_SLACK * np.sqrt(sg[r] * sg[r] + sg[best] * sg[best])
+        for i in (1, 2):
+            out = max(out, abs(est[best, i] - est[r, i]) - slack)
+    return out
+
+
 @njit(parallel=True, cache=True)
 def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, ladder, kinds,
                            gamma, growth, calib, coef, scale, frame, quad, quad_scale, model,
-                           residual, status, chosen, sigma):
+                           residual, status, chosen, sigma, bias):
     """Fits at anchors with the neighborhood size chosen per anchor (module docstring).
 
     Parameters
@@ -211,6 +227,10 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
         Output: neighbors of the kept fit (the anchor takes part besides).
     sigma : ndarray, shape (a,)
         Output: the kept fit's standard error of curvature (inf when none was usable).
+    bias : ndarray, shape (a,)
+        Output: the kept fit's bias as the smaller fits show it: the largest excess of
+        ``|k_kept - k_r|`` (k1 or k2) over ``BIAS_SLACK`` times their combined standard
+        errors, over every usable smaller rung r (0 when none disagrees).
     """
     levels = ladder.shape[0]
     for j in prange(anchors.shape[0]):
@@ -229,6 +249,7 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
         est[levels, 1], est[levels, 2], est[levels, 3], est[levels, 4] = fk1, fk2, fd, fh
         chosen[j] = full
         sigma[j] = np.inf
+        bias[j] = 0.0
         sg = np.full(levels + 1, np.inf)
         for li in range(levels + 1):
             if est[li, 0] == 1.0:
@@ -238,6 +259,7 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
         if best < 0:
             continue  # nothing usable: the full fit's status stands
         sigma[j] = sg[best]
+        bias[j] = _bias(est, sg, best)
         if best < levels:
             chosen[j] = ladder[best]
             for r in range(N_QUAD):

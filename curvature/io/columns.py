@@ -24,7 +24,9 @@ VECTOR_COLUMNS = {
 }
 # Result fields in the order they are written (DESIGN.md section 6).
 RESULT_ORDER = ("normals", "k1", "k2", "mean", "gaussian", "dir1", "dir2", "residual",
-                "neighbor_count", "status")
+                "neighbor_count", "status", "k1_std", "k2_std", "mean_std", "uncertain")
+# Result fields a file may lack (written by versions before them): NaN or derived when read.
+OPTIONAL = ("k1_std", "k2_std", "mean_std", "uncertain")
 # Written after them, computed from k1 and k2 (CurvatureResult.derived_fields).
 DERIVED = ("shape_index", "curvedness")
 
@@ -84,6 +86,7 @@ def table_of(obj, source=None) -> Table:
         order = [k for k in RESULT_ORDER if k in all_fields]
         order += [k for k in all_fields if k not in order]
         all_fields["status"] = np.asarray(all_fields["status"]).astype(np.uint8)  # 0..4
+        all_fields["uncertain"] = np.asarray(all_fields["uncertain"]).astype(np.uint8)
         fields = {"points": obj.points, **{k: all_fields[k] for k in order},
                   **obj.derived_fields(), "index": obj.index}
         fields.update(expand_colors(dict(obj.attributes)))
@@ -171,6 +174,8 @@ def result_from_cloud(cloud: PointCloud) -> CurvatureResult:
     own = set(RESULT_ORDER) | set(DERIVED) | {c for name in VECTOR_COLUMNS
                                               for c in VECTOR_COLUMNS[name]}
     attributes = {k: v for k, v in props.items() if k not in own}
+    optional = {name: np.asarray(props[name], dtype=np.uint8 if name == "uncertain"
+                                 else np.float64) for name in OPTIONAL if name in props}
     return CurvatureResult(
         points=cloud.points,
         k1=np.asarray(scalar("k1"), dtype=np.float64),
@@ -183,6 +188,7 @@ def result_from_cloud(cloud: PointCloud) -> CurvatureResult:
         neighbor_count=np.asarray(scalar("neighbor_count")).astype(np.int32),
         status=np.asarray(scalar("status")).astype(np.int8),
         residual=np.asarray(scalar("residual"), dtype=np.float64),
+        **optional,
         faces=cloud.faces,
         attributes=attributes,
     )

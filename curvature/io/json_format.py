@@ -1,8 +1,8 @@
 """Columnar JSON: ``{"n": n, "fields": {name: [...]}, "faces": [...], "info": {...}}``.
 
 Scalars are lists of numbers, vectors lists of ``[x, y, z]``; NaN and Inf become ``null``
-(JSON has neither). The text is assembled from shortest round-trip number strings per column,
-which is much faster than ``json.dumps`` on Python lists for large results.
+(JSON has neither). Numbers are the shortest text that reads back to the same value, written
+by orjson straight from the arrays, block by block, so a result is never held as Python lists.
 """
 
 from __future__ import annotations
@@ -11,22 +11,23 @@ import json
 from typing import BinaryIO
 
 import numpy as np
+import orjson
 
 from .columns import Table
-from .tokens import number_texts
 
 _CHUNK_ROWS = 65536
 
 
-def _texts(arr: np.ndarray) -> list[str]:
-    """Per-element JSON text; non-finite floats -> ``null``."""
-    if arr.dtype.kind == "b":
-        return ["true" if v else "false" for v in arr.tolist()]
-    text = number_texts(arr)
-    if arr.dtype.kind == "f":
-        for i in np.flatnonzero(~np.isfinite(arr)).tolist():
-            text[i] = "null"
-    return text
+def _items(part: np.ndarray) -> bytes:
+    """The elements of ``part`` (rows for (m, k) arrays) as JSON, without the brackets.
+
+    orjson writes the shortest text that reads back to the same value (float32 as float32)
+    and NaN/Inf as ``null``, at a few hundred MB/s instead of the tens of Python's per-number
+    formatting.
+    """
+    if not part.dtype.isnative:  # big-endian input attributes; orjson takes native order only
+        part = part.astype(part.dtype.newbyteorder("="))
+    return orjson.dumps(np.ascontiguousarray(part), option=orjson.OPT_SERIALIZE_NUMPY)[1:-1]
 
 
 def _json_default(value):
@@ -54,22 +55,13 @@ def write_json(fh: BinaryIO, table: Table) -> None:
     for k, (name, arr) in enumerate(table.fields.items()):
         fh.write(((", " if k else "") + json.dumps(name) + ": [").encode())
         for lo in range(0, table.n, _CHUNK_ROWS):
-            part = np.asarray(arr[lo:lo + _CHUNK_ROWS])
-            sep = "," if lo else ""
-            if part.ndim == 1:
-                body = ",".join(_texts(part))
-            else:
-                cols = [_texts(part[:, j]) for j in range(part.shape[1])]
-                body = ",".join("[" + ",".join(row) + "]" for row in zip(*cols, strict=True))
-            fh.write((sep + body).encode())
+            fh.write((b"," if lo else b"") + _items(np.asarray(arr[lo:lo + _CHUNK_ROWS])))
         fh.write(b"]")
     fh.write(b"}")
     if table.faces is not None:
         fh.write(b', "faces": [')
         for lo in range(0, len(table.faces), _CHUNK_ROWS):
-            part = table.faces[lo:lo + _CHUNK_ROWS].tolist()
-            fh.write((("," if lo else "") + ",".join(f"[{a},{b},{c}]"
-                                                    for a, b, c in part)).encode())
+            fh.write((b"," if lo else b"") + _items(table.faces[lo:lo + _CHUNK_ROWS]))
         fh.write(b"]")
     if table.info:
         info = json.loads(json.dumps(table.info, default=_json_default))

@@ -29,6 +29,7 @@ from ..orientation import (
     signs_from_viewpoint,
 )
 from ..result import CurvatureResult
+from ..uncertainty import uncertain
 from ..validation import as_faces, as_points, as_vectors
 from .attributes import carry_input, file_viewpoint, orientation_rule
 from .block import DERIVED, compute_block
@@ -167,6 +168,8 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
     res = unpermute(res, inv, pts, tri)
     res.mean[:] = 0.5 * (res.k1 + res.k2)
     res.gaussian[:] = res.k1 * res.k2
+    res.uncertain[:] = uncertain(res.k1, res.k2, res.k1_std, res.k2_std, res.neighbor_count,
+                                 res.status, float(np.linalg.norm(np.ptp(pts, axis=0))))
     timings["total"] = time.perf_counter() - t_start
     res.info = {
         **info, "preset": preset, "orientation": req.mode, "workers": req.workers, "points": n,
@@ -189,7 +192,7 @@ def unpermute(res: CurvatureResult, inv: np.ndarray, pts: np.ndarray, faces) -> 
     fields = res.fields()
     for name in list(fields):
         if name in DERIVED:
-            fields[name] = np.empty(inv.shape[0])
+            fields[name] = np.empty(inv.shape[0], fields[name].dtype)
         else:
             fields[name] = fields[name][inv]
         setattr(res, name, fields[name])
@@ -208,6 +211,9 @@ def orient(res: CurvatureResult, mode: str, ref_normals, viewpoint, graph) -> No
     else:
         signs = signs_auto(res.points, res.normals, graph)
     apply_signs(signs, res.k1, res.k2, res.normals, res.dir1, res.dir2)
+    # k1 and k2 swap where the normal flips: so do their standard errors
+    flip = signs < 0
+    res.k1_std[flip], res.k2_std[flip] = res.k2_std[flip], res.k1_std[flip].copy()
 
 
 __all__ = ["DEFAULT_FIT", "DEFAULT_METHOD", "FITS", "METHODS", "ORIENTATIONS", "PRESETS",

@@ -98,9 +98,9 @@ def select_rows(res: CurvatureResult, rows: np.ndarray, points: np.ndarray) -> C
                            **{name: arr[rows] for name, arr in res.fields().items()})
 
 
-# Result fields computed from k1 and k2 at the very end (never written before, so their pages
-# cost no memory while a big cloud is computed).
-DERIVED = ("mean", "gaussian")
+# Result fields computed from k1 and k2 (and their errors) at the very end (never written
+# before, so their pages cost no memory while a big cloud is computed).
+DERIVED = ("mean", "gaussian", "uncertain")
 
 
 def empty_result(pts: np.ndarray, faces) -> CurvatureResult:
@@ -110,4 +110,5 @@ def empty_result(pts: np.ndarray, faces) -> CurvatureResult:
         points=pts, k1=np.empty(n), k2=np.empty(n), mean=np.empty(n), gaussian=np.empty(n),
         normals=np.empty((n, 3)), dir1=np.empty((n, 3)), dir2=np.empty((n, 3)),
         neighbor_count=np.empty(n, np.int32), status=np.empty(n, np.int8),
-        residual=np.empty(n), faces=faces)
+        residual=np.empty(n), k1_std=np.empty(n), k2_std=np.empty(n), mean_std=np.empty(n),
+        uncertain=np.empty(n, np.uint8), faces=faces)

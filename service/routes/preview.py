@@ -47,7 +47,8 @@ def render_cached(job_dir: Path, field: str, view: str, up: str = "auto",
     FileNotFoundError
         The job's files are gone (deleted or expired).
     ResultCorrupt
-        The canonical result fails its checksum ``canonical_sha256``.
+        The canonical result fails its checksum ``canonical_sha256``, or was computed by a
+        version that did not have ``field`` (the job is then computed again).
     """
     target = preview_path(job_dir, field, view, up)
     if not target.exists():
@@ -55,6 +56,8 @@ def render_cached(job_dir: Path, field: str, view: str, up: str = "auto",
                                                                  canonical_sha256):
             raise ResultCorrupt(f"{CANONICAL_RESULT} fails its checksum")
         with np.load(job_dir / CANONICAL_RESULT, allow_pickle=False) as archive:
+            if field not in archive.files:  # computed by a version without that field
+                raise ResultCorrupt(f"{CANONICAL_RESULT} predates the field {field!r}")
             arrays = {"points": archive["points"], field: archive[field]}
         curvature.render_preview(arrays, field, view=view, up=up, path=target)  # atomic
     return target

@@ -24,7 +24,7 @@ ARCHITECTURE_DOC = PACKAGE.parent / "docs" / "architecture.md"
 LAYERS = {
     "base": ("errors", "status", "params", "validation", "cloud", "result", "field_info",
              "progress"),
-    "kernels": ("neighborhoods", "fitting", "orientation"),
+    "kernels": ("neighborhoods", "fitting", "orientation", "uncertainty"),
     "estimators": ("estimators",),
     "pipeline": ("pipeline",),
     "files": ("io", "preview"),

@@ -140,8 +140,28 @@ def make_result(n=30, faces=True) -> CurvatureResult:
         points=pts, k1=k1, k2=k2, mean=(k1 + k2) / 2, gaussian=k1 * k2, normals=normals,
         dir1=dir1, dir2=dir2, neighbor_count=rng.integers(3, 40, n).astype(np.int32),
         status=status, residual=np.abs(rng.normal(size=n)) * 1e-3,
+        k1_std=np.where(bad, np.nan, rng.uniform(0.01, 0.1, n)),
+        k2_std=np.where(bad, np.nan, rng.uniform(0.01, 0.1, n)),
+        mean_std=np.where(bad, np.nan, rng.uniform(0.01, 0.1, n)),
+        uncertain=(bad | (rng.uniform(size=n) < 0.3)).astype(np.uint8),
         faces=rng.integers(0, n, size=(12, 3)) if faces else None,
         info={"method": "knn", "fit": "implicit", "params": {"k": 24}, "seconds": 0.25})
+
+
+def test_result_without_standard_errors_reads_back_with_nan(tmp_path):
+    """A result file written before the standard errors existed still reads as a result."""
+    res = make_result()
+    path = tmp_path / "res.csv"
+    write(path, res)
+    rows = [line.split(",") for line in path.read_text().splitlines()]
+    drop = {rows[0].index(name) for name in ("k1_std", "k2_std", "mean_std", "uncertain")}
+    old = tmp_path / "old.csv"
+    old.write_text("\n".join(",".join(v for i, v in enumerate(row) if i not in drop)
+                             for row in rows) + "\n")
+    back = read_result(old)
+    assert np.isnan(back.k1_std).all() and np.isnan(back.mean_std).all()
+    np.testing.assert_array_equal(back.uncertain, (res.status != 0).astype(np.uint8))
+    np.testing.assert_array_equal(back.k1, res.k1)
 
 
 def assert_same_result(a: CurvatureResult, b: CurvatureResult, faces=True):
@@ -182,13 +202,16 @@ def test_result_ply_round_trip(tmp_path, binary):
     assert ("binary_little_endian" in head) == binary
     names = [ln.split()[-1] for ln in head.splitlines() if ln.startswith("property ")]
     fields = ["k1", "k2", "mean", "gaussian", "d1x", "d1y", "d1z", "d2x", "d2y", "d2z",
-              "residual", "neighbor_count", "status", "shape_index", "curvedness", "index"]
+              "residual", "neighbor_count", "status", "k1_std", "k2_std", "mean_std",
+              "uncertain", "shape_index", "curvedness", "index"]
     # CloudCompare loads only standard names and scalar_*; MeshLab only quality.
     assert names == ["x", "y", "z", "nx", "ny", "nz", *(f"scalar_{f}" for f in fields),
                      "quality", "vertex_indices"]
     assert "property double scalar_residual" in head
     assert "property int scalar_neighbor_count" in head
     assert "property uchar scalar_status" in head
+    assert "property uchar scalar_uncertain" in head
+    assert "property double scalar_k1_std" in head
     assert "property list uchar int vertex_indices" in head
     cloud = read(path)
     assert set(cloud.properties) == set(fields)
@@ -206,7 +229,8 @@ def test_result_csv_round_trip(tmp_path):
     write(path, res)
     lines = path.read_text().splitlines()
     assert lines[0] == ("x,y,z,nx,ny,nz,k1,k2,mean,gaussian,d1x,d1y,d1z,d2x,d2y,d2z,"
-                        "residual,neighbor_count,status,shape_index,curvedness,index")
+                        "residual,neighbor_count,status,k1_std,k2_std,mean_std,uncertain,"
+                        "shape_index,curvedness,index")
     assert len(lines) == 31 and "nan" in lines[3].split(",")
     assert_same_result(res, read_result(path), faces=False)
 
@@ -218,6 +242,7 @@ def test_result_npz_round_trip(tmp_path):
     with np.load(path) as z:
         assert set(z.files) == {"points", "normals", "k1", "k2", "mean", "gaussian", "dir1",
                                 "dir2", "residual", "neighbor_count", "status", "faces",
+                                "k1_std", "k2_std", "mean_std", "uncertain",
                                 "shape_index", "curvedness", "index"}
         assert z["dir1"].shape == (30, 3) and z["status"].dtype == np.uint8
     cloud = read(path)
@@ -266,14 +291,41 @@ def test_result_json(tmp_path):
     assert doc["n"] == 30
     fields = doc["fields"]
     assert list(fields) == ["points", "normals", "k1", "k2", "mean", "gaussian", "dir1",
-                            "dir2", "residual", "neighbor_count", "status", "shape_index",
-                            "curvedness", "index"]
+                            "dir2", "residual", "neighbor_count", "status", "k1_std",
+                            "k2_std", "mean_std", "uncertain", "shape_index", "curvedness",
+                            "index"]
+    assert fields["k1_std"][2] is None and fields["k1_std"][0] == res.k1_std[0]
+    assert fields["uncertain"] == res.uncertain.tolist()
     assert fields["k1"][2] is None and fields["k1"][0] == res.k1[0]
     assert fields["dir1"][7] == [None, None, None]
     assert fields["points"][5] == res.points[5].tolist()
     assert fields["status"][11] == 4 and fields["neighbor_count"] == res.neighbor_count.tolist()
     assert doc["faces"] == res.faces.tolist()
     assert doc["info"]["params"] == {"k": 24}
+
+
+def test_result_json_numbers_read_back_exactly_across_blocks(monkeypatch):
+    """Every number reads back bit for bit (float64 and float32 attributes, big-endian ones
+    too), non-finite values are null, and blocks join with exactly one comma."""
+    from curvature.io import json_format
+
+    monkeypatch.setattr(json_format, "_CHUNK_ROWS", 7)  # 30 points: blocks of 7, 7, 7, 7, 2
+    res = make_result()
+    rng = np.random.default_rng(5)
+    res.k2 = rng.normal(size=30) * 10.0 ** rng.integers(-150, 150, 30)
+    res.k2[3], res.k2[4] = np.inf, -np.inf
+    res.attributes["intensity"] = rng.random(30).astype(np.float32)
+    res.attributes["height"] = rng.normal(size=30).astype(">f8")
+    doc = json.loads(write_bytes(res, "json"))
+    k2 = doc["fields"]["k2"]
+    assert k2[3] is None and k2[4] is None and len(k2) == 30
+    finite = np.isfinite(res.k2)
+    np.testing.assert_array_equal(np.array(k2, dtype=object)[finite].astype(float),
+                                  res.k2[finite])
+    np.testing.assert_array_equal(np.float32(doc["fields"]["intensity"]),
+                                  res.attributes["intensity"])
+    np.testing.assert_array_equal(doc["fields"]["height"], res.attributes["height"])
+    assert doc["fields"]["points"] == res.points.tolist()
 
 
 def test_cloud_with_properties_round_trips_types(tmp_path):

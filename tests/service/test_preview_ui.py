@@ -240,3 +240,16 @@ def test_page_lists_jobs_with_previews_and_uploads_a_file(live_server, tmp_path)
     r, g, b = pixels[..., 0], pixels[..., 1], pixels[..., 2]
     assert np.sum((r > 150) & (b < 110) & (g < 130)) > 200  # the previews' reds (convex) ...
     assert np.sum((b > 150) & (r < 110)) > 200  # ... and blues (inner side of the tori)
+
+
+def test_a_result_from_before_a_field_existed_is_computed_again(tmp_path):
+    """A canonical result written before a field existed (k1_std came with issue 16) makes the
+    preview of that field a ResultCorrupt, which the route answers with 503 result-corrupt
+    and a recomputation, not a 500."""
+    from service.result_files import CANONICAL_RESULT, ResultCorrupt
+    from service.routes.preview import render_cached
+
+    np.savez(tmp_path / CANONICAL_RESULT, points=sphere(50), mean=np.zeros(50))
+    assert render_cached(tmp_path, "mean", "iso").exists()
+    with pytest.raises(ResultCorrupt, match="predates the field 'k1_std'"):
+        render_cached(tmp_path, "k1_std", "iso")

@@ -1,0 +1,80 @@
+"""Per-point standard errors of k1, k2 and H, and the flag of untrustworthy estimates.
+
+Where the standard errors come from (each from the fit that produced the value):
+
+- neighborhood methods (``knn``, ``tc``, ``egg``, ``mesh``, any fit): the least-squares
+  covariance of the local quadratic over the neighborhood the fit used, from its residual and
+  the positions of its points, propagated to k1, k2 and H
+  (:func:`curvature.fitting.uncertainty.design_std`), times a factor per fit model
+  (:data:`FIT_CALIBRATION`);
+- the default's noisy branch: the calibrated standard error of the fit its scale selection
+  kept (``sigma_s`` of :mod:`curvature.fitting.scale_selection`), combined with the bias that
+  selection sees: how far the kept fit's curvature lies from the smaller fits' beyond their
+  own errors;
+- the default's clean branch (implicit quadrics, exact on quadrics): the model error its
+  residual implies, ``CLEAN_CALIBRATION * residual / h^2``; zero residual, zero error.
+
+A floor of :data:`STD_FLOOR` of the curvature itself stands for the discretisation error no
+residual shows (sampling, foot point).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["ANCHORED_MEAN_SHARE", "CLEAN_CALIBRATION", "FIT_CALIBRATION", "STD_FLOOR",
+           "THIN_NEIGHBORS", "UNCERTAIN_SHARE", "uncertain", "with_floor"]
+
+#: Factor of the height-function covariance per fit model (benchmarks/uncertainty.py).
+FIT_CALIBRATION = {"monge": 1.0, "adaptive": 1.0, "implicit": 1.0, "nfr": 1.0}
+#: Curvature error per unit of residual / h^2 of a noise-free implicit quadric fit.
+CLEAN_CALIBRATION = 7.0
+#: Standard error of H per unit of the anchored fits' error of k1 and k2.
+ANCHORED_MEAN_SHARE = 0.8
+#: Relative floor of a standard error (share of max(|k1|, |k2|)).
+STD_FLOOR = 1e-9
+#: A point is uncertain when a standard error of k1 or k2 exceeds this share of its
+#: curvature: then the 2-sigma interval of a curvature reaches past zero.
+UNCERTAIN_SHARE = 0.5
+#: ... or when its fit used fewer neighbors than this.
+THIN_NEIGHBORS = 10
+
+
+def with_floor(std: np.ndarray, k1: np.ndarray, k2: np.ndarray,
+               scale: float = 0.0) -> np.ndarray:
+    """``sqrt(std^2 + (STD_FLOOR max(|k1|, |k2|, scale))^2)``, shape (n,).
+
+    ``scale`` (1 / length, e.g. 1 / point spacing) keeps the floor above rounding on flat
+    faces, where the curvature itself is zero.
+    """
+    floor = STD_FLOOR * np.maximum(np.maximum(np.abs(k1), np.abs(k2)), scale)
+    return np.hypot(std, floor)
+
+
+def uncertain(k1, k2, k1_std, k2_std, neighbor_count, status, diagonal: float) -> np.ndarray:
+    """The flag of estimates not to be trusted, shape (n,), uint8 (1: uncertain).
+
+    A point is uncertain when it has no estimate (``status != 0``), when its fit used fewer
+    than :data:`THIN_NEIGHBORS` neighbors, or when the standard error of k1 or of k2 exceeds
+    :data:`UNCERTAIN_SHARE` times ``max(|k1|, |k2|, 1 / diagonal)``: the curvature is not
+    known to within half its size. The term ``1 / diagonal`` (a sphere as large as the
+    cloud's bounding-box diagonal, which the cloud cannot tell from a plane) keeps flat faces
+    with small errors trusted.
+
+    Parameters
+    ----------
+    k1, k2, k1_std, k2_std : ndarray, shape (n,)
+    neighbor_count, status : ndarray, shape (n,), int
+    diagonal : float
+        Bounding-box diagonal of the cloud (length unit).
+
+    Returns
+    -------
+    ndarray, shape (n,), uint8
+    """
+    floor = 1.0 / diagonal if diagonal > 0.0 else 0.0
+    scale = np.maximum(np.maximum(np.abs(k1), np.abs(k2)), floor)
+    with np.errstate(invalid="ignore"):
+        loose = ~(np.maximum(k1_std, k2_std) <= UNCERTAIN_SHARE * scale)
+    bad = (np.asarray(status) != 0) | (np.asarray(neighbor_count) < THIN_NEIGHBORS) | loose
+    return bad.astype(np.uint8)

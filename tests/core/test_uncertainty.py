@@ -1,0 +1,118 @@
+"""Standard errors of k1, k2 and H (issue 16): calibrated, NaN exactly where no estimate."""
+
+import numpy as np
+import pytest
+
+import curvature
+import curvature.io
+from curvature import synthetic
+from curvature.uncertainty import THIN_NEIGHBORS, UNCERTAIN_SHARE, uncertain
+
+
+def coverage(res, cloud, which="k1"):
+    """Share of the ok points whose true error is within 2 standard errors."""
+    truth = {"k1": cloud.k1, "k2": cloud.k2, "mean": 0.5 * (cloud.k1 + cloud.k2)}[which]
+    ok = res.status == 0
+    err = np.abs(getattr(res, which) - truth)[ok]
+    return float(np.mean(err <= 2.0 * getattr(res, f"{which}_std")[ok]))
+
+
+@pytest.mark.parametrize("shape", ["sphere", "cylinder"])
+@pytest.mark.parametrize("method", ["auto", "knn"])
+def test_coverage_on_noisy_shapes_within_bounds(shape, method):
+    cloud = getattr(synthetic, shape)(10_000, noise=0.3, seed=4)
+    kw = {"k": 24, "fit": "monge"} if method == "knn" else {}
+    res = curvature.estimate(cloud.points, method, normals=cloud.normals, **kw)
+    for which in ("k1", "k2", "mean"):
+        assert 0.88 <= coverage(res, cloud, which) <= 0.995, (which, coverage(res, cloud, which))
+
+
+def test_std_shrinks_as_one_over_sqrt_k_on_a_plane():
+    """Same patch, four times the points: half the standard error (and half the error)."""
+    stds, errors = [], []
+    for n, k in ((2_000, 24), (8_000, 96), (32_000, 384)):
+        cloud = synthetic.plane(n, noise=0.2, seed=7)
+        res = curvature.estimate(cloud.points, "knn", k=k, fit="monge", normals=cloud.normals)
+        inner = cloud.interior & (res.status == 0)
+        stds.append(np.median(res.k1_std[inner]))
+        errors.append(np.sqrt(np.mean(res.k1[inner] ** 2 + res.k2[inner] ** 2) / 2))
+    ratios = np.array(stds[1:]) / np.array(stds[:-1])
+    np.testing.assert_allclose(ratios, 0.5, rtol=0.12)
+    # and the standard error follows the measured error
+    np.testing.assert_allclose(np.array(stds) / np.array(errors), 1.0, rtol=0.35)
+
+
+@pytest.mark.parametrize("method,kw", [("knn", {"k": 10, "fit": "implicit"}),
+                                       ("knn", {"k": 10, "fit": "monge"}), ("auto", {})])
+def test_nan_exactly_where_status_is_not_ok(method, kw):
+    rng = np.random.default_rng(5)
+    cloud = synthetic.sphere(2000, noise=0.2, seed=15).points
+    dup = np.tile([[50.0, 50.0, 50.0]], (30, 1))
+    line = np.c_[np.linspace(0, 1, 30), np.zeros(30), np.zeros(30)] + [-50.0, 0, 0]
+    pts = rng.permutation(np.vstack([cloud, dup, line]))
+    res = curvature.estimate(pts, method, **kw)
+    bad = res.status != 0
+    assert bad.any() and (~bad).any()
+    for name in ("k1_std", "k2_std", "mean_std"):
+        values = getattr(res, name)
+        np.testing.assert_array_equal(np.isnan(values), bad, err_msg=name)
+        assert np.all(values[~bad] >= 0.0), name
+    assert np.all(res.uncertain[bad] == 1)
+
+
+def test_standard_errors_follow_k1_and_k2_when_the_normal_flips():
+    cloud = synthetic.cylinder(4000, noise=0.2, seed=3)
+    out = curvature.estimate(cloud.points, "knn", k=24, fit="monge", normals=cloud.normals)
+    inward = curvature.estimate(cloud.points, "knn", k=24, fit="monge", normals=-cloud.normals)
+    ok = out.status == 0
+    assert not np.allclose(out.k1_std[ok], out.k2_std[ok])  # a test that can fail
+    np.testing.assert_allclose(inward.k1_std[ok], out.k2_std[ok])
+    np.testing.assert_allclose(inward.k2_std[ok], out.k1_std[ok])
+    np.testing.assert_allclose(inward.mean_std[ok], out.mean_std[ok])
+
+
+def test_noise_free_quadric_has_near_zero_std_and_torus_a_positive_one():
+    sphere = synthetic.sphere(4000, seed=1)
+    res = curvature.estimate(sphere.points, normals=sphere.normals)
+    assert res.info["plan"]["clean"]
+    assert np.nanmedian(res.k1_std) < 1e-6
+    torus = synthetic.torus(10_000, seed=1)
+    res = curvature.estimate(torus.points, normals=torus.normals)
+    assert np.nanmedian(res.k1_std) > 1e-3
+    assert coverage(res, torus, "k1") > 0.85
+
+
+def test_uncertain_rule():
+    k1 = np.array([1.0, 1.0, 1.0, 0.0, 0.0, np.nan, 1.0])
+    k2 = np.array([0.5, 0.5, 0.5, 0.0, 0.0, np.nan, 1.0])
+    share = UNCERTAIN_SHARE
+    k1_std = np.array([0.1, share + 0.01, 0.1, 0.05, 0.2, np.nan, np.inf])
+    k2_std = np.full(7, 0.1)
+    count = np.array([24, 24, THIN_NEIGHBORS - 1, 24, 24, 24, 24])
+    status = np.array([0, 0, 0, 0, 0, 1, 0])
+    # a diagonal of 5: flat points are trusted while their error is below 0.5 * (1 / 5)
+    flags = uncertain(k1, k2, k1_std, k2_std, count, status, 5.0)
+    np.testing.assert_array_equal(flags, [0, 1, 1, 0, 1, 1, 1])
+    assert flags.dtype == np.uint8
+
+
+def test_uncertain_grows_with_noise():
+    shares = []
+    for noise in (0.1, 0.5):
+        cloud = synthetic.torus(6000, noise=noise, seed=2)
+        res = curvature.estimate(cloud.points, "knn", k=24, fit="monge")
+        shares.append(res.uncertain.mean())
+    assert shares[0] < shares[1]
+
+
+def test_cli_summary_prints_the_median_standard_error(tmp_path, capsys):
+    from curvature.cli import main
+
+    cloud = synthetic.sphere(3000, noise=0.2, seed=1)
+    src = tmp_path / "s.ply"
+    curvature.write(src, cloud.points)
+    assert main(["estimate", str(src), "-o", str(tmp_path / "r.npz")]) == 0
+    line = next(ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("std"))
+    res = curvature.io.read_result(tmp_path / "r.npz")
+    assert f"k1 {np.nanmedian(res.k1_std):.4g}" in line
+    assert "uncertain" in line
