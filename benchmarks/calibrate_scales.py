@@ -15,7 +15,7 @@ import argparse
 import numpy as np
 
 from curvature import synthetic
-from curvature.auto import knn_csr
+from curvature.estimators.auto import knn_csr
 from curvature.fitting.normal_field import nfr_anchor_fits_one, pca_normals
 from curvature.fitting.normal_quadric import N_QUAD
 from curvature.fitting.scale_selection import DEFAULT_KINDS, DEFAULT_LADDER, ladder_estimates

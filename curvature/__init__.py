@@ -10,7 +10,6 @@ Public surface (DESIGN.md section 5)::
 """
 
 from . import synthetic
-from .auto import AUTO_PARAMS
 from .cloud import PointCloud
 from .errors import (
     CurvatureInputError,
@@ -20,6 +19,7 @@ from .errors import (
     TooFewPointsError,
     UnknownFormatError,
 )
+from .estimators.auto import AUTO_PARAMS
 from .field_info import FieldInfo
 from .field_info import describe as describe_field
 from .fitting import FIT_PARAMS

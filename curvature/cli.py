@@ -1,8 +1,8 @@
-"""Command line: ``curvature estimate|info|neighbors|bench``, plus plugin sub-commands.
+"""Command line: ``curvature estimate|synthetic|info|neighbors``, plus plugin sub-commands.
 
 Plugins are functions ``register(subparsers)`` found in the ``curvature.cli`` entry-point
-group (e.g. ``curvature remote`` from ``curvature_client``); the core never imports them by
-name.
+group (``curvature remote`` from ``curvature_client``, ``curvature bench`` from
+:mod:`curvature.studies.cli`); the core never imports them by name.
 """
 
 from __future__ import annotations
@@ -11,12 +11,11 @@ import argparse
 import sys
 import time
 from importlib.metadata import entry_points
-from pathlib import Path
 
 import numpy as np
 
-from .auto import AUTO_PARAMS
 from .errors import CurvatureInputError
+from .estimators.auto import AUTO_PARAMS
 from .fitting import FIT_PARAMS, FITS, SOLVERS
 from .io import read, write
 from .neighborhoods import FINDERS, make_finder
@@ -127,25 +126,6 @@ def build_parser() -> argparse.ArgumentParser:
     nb.add_argument("--index", type=int, required=True, help="the query point's index")
     add_method_options(nb)
 
-    bench = sub.add_parser("bench", help="regenerate a benchmark study (CSV and PNG plots)")
-    bench.add_argument("study", choices=["paper", "accuracy", "parts"],
-                       help="paper: the accuracy study of Khameneifar & Feng (2019); "
-                            "accuracy: the default estimator against issue 6's targets, beside "
-                            "the paper preset and APSS (when pymeshlab is installed), then the "
-                            "part shapes; parts: the part shapes alone, per region, beside APSS "
-                            "and CGAL jet fitting (when installed)")
-    bench.add_argument("--out", required=True, help="output folder")
-    bench.add_argument("--quick", action="store_true", help="reduced grid (about a minute)")
-    bench.add_argument("--seeds", type=int, default=None,
-                       help="seeds per configuration (default: 3, quick: 2)")
-    bench.add_argument("--workers", type=int, default=None,
-                       help="threads of each estimate (default: all cores)")
-    bench.add_argument("--data", default=None,
-                       help="folder holding bun000.ply (default: ../shared/data next to the "
-                            "repository)")
-    bench.add_argument("--no-apss", action="store_true",
-                       help="accuracy, parts: leave MeshLab's APSS out even if pymeshlab is "
-                            "installed")
     add_plugins(sub)
     return parser
 
@@ -303,51 +283,6 @@ def cmd_neighbors(args) -> int:
     return 0
 
 
-def cmd_bench(args) -> int:
-    from . import paper_study
-
-    if args.seeds is not None and args.seeds < 1:
-        raise CurvatureInputError(f"--seeds must be >= 1, got {args.seeds}")
-    if args.study == "accuracy":
-        return bench_accuracy(args)
-    if args.study == "parts":
-        return bench_parts(args, args.out)
-    data = Path(args.data) if args.data else paper_study.default_data_dir()
-    scan = data / paper_study.SCAN_NAME
-    if not scan.is_file():
-        raise CurvatureInputError(f"{scan} not found; point --data at the folder holding "
-                                  f"{paper_study.SCAN_NAME}")
-    changes = {"scan": str(scan), "workers": args.workers}
-    if args.seeds is not None:
-        changes["seeds"] = tuple(range(1, args.seeds + 1))
-    config = (paper_study.StudyConfig.quick if args.quick
-              else paper_study.StudyConfig.full)(**changes)
-    paper_study.run_study(config, args.out)
-    return 0
-
-
-def bench_accuracy(args) -> int:
-    from . import accuracy_study
-
-    changes = {"workers": args.workers}
-    if args.seeds is not None:
-        changes["seeds"] = tuple(range(1, args.seeds + 1))
-    if args.no_apss:
-        changes["estimators"] = ("default", "paper")
-    config = (accuracy_study.AccuracyConfig.quick if args.quick
-              else accuracy_study.AccuracyConfig.full)(**changes)
-    accuracy_study.run_accuracy(config, args.out)
-    return bench_parts(args, Path(args.out) / "parts")
-
-
-def bench_parts(args, out) -> int:
-    from . import parts_study
-
-    estimators = [e for e in parts_study.ESTIMATORS if not (args.no_apss and e == "apss")]
-    parts_study.run_parts(out, quick=args.quick, estimators=estimators)
-    return 0
-
-
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     if argv[:1] == ["synthetic"]:  # its own parser lives with the shapes
@@ -356,8 +291,7 @@ def main(argv=None) -> int:
         return synthetic.main(argv[1:])
     parser = build_parser()
     args = parser.parse_args(argv)
-    commands = {"estimate": cmd_estimate, "info": cmd_info, "neighbors": cmd_neighbors,
-                "bench": cmd_bench}
+    commands = {"estimate": cmd_estimate, "info": cmd_info, "neighbors": cmd_neighbors}
     try:
         handler = getattr(args, "handler", None) or commands[args.command]
         return handler(args)

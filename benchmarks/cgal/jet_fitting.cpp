@@ -1,5 +1,5 @@
 // Per-point principal curvatures by CGAL's jet fitting (CGAL::Monge_via_jet_fitting), as a
-// benchmark peer for the curvature library. Built and driven by curvature/reference_cgal.py.
+// benchmark peer for the curvature library. Built and driven by curvature/studies/peers/cgal.py.
 //
 // Usage: jet_fitting [INPUT [OUTPUT]]   (stdin / stdout when omitted or "-")
 //

@@ -31,7 +31,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import ParameterError
-from . import SyntheticCloud, _add_noise, _check_common, _check_positive, _cross
+from .base import SyntheticCloud, _add_noise, _check_common, _check_positive, _cross
 from .profiles import Profile, filleted_polygon
 
 __all__ = ["PART_SHAPES", "blade", "filleted_box", "filleted_cylinder", "thin_plate"]

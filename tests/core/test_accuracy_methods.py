@@ -18,7 +18,7 @@ import pytest
 import curvature
 from curvature import synthetic
 from curvature.evaluation import PointErrors, error_summary, point_errors
-from curvature.paper_study import METHODS
+from curvature.studies.paper import METHODS
 
 FITS = ("implicit", "monge")
 SHAPES = ("torus", "bezier")

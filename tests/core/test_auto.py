@@ -7,7 +7,7 @@ import pytest
 
 import curvature
 from curvature import synthetic
-from curvature.auto import AutoPlan, grid_cells, plan_auto
+from curvature.estimators.auto import AutoPlan, grid_cells, plan_auto
 from curvature.neighborhoods.kdtree import build_tree
 
 

@@ -3,7 +3,7 @@
 At a fixed neighbor count a denser cloud gives each fit a smaller patch, so the error rose with
 density (issue 15: torus at 0.25 % BBD noise, mean |k1 error| 0.054 at 100k points, 0.38 at
 1M). Above ``dense_noise`` the fits see a thinned share of the cloud with normals over the
-whole cloud (curvature.auto, ``AutoRun._dense``). These clouds are small stand-ins of the
+whole cloud (curvature.estimators.auto, ``AutoRun._dense``). These clouds are small stand-ins of the
 issue's 100k / 1M pair: the relative noise (noise over spacing) grows as sqrt(points), so a
 40k-point sphere at 0.8 % noise is as dense for its noise as 1M points at 0.25 %.
 """
@@ -15,7 +15,7 @@ import pytest
 
 import curvature
 from curvature import synthetic
-from curvature.sampling import thinned
+from curvature.estimators.sampling import thinned
 
 
 def mean_error(cloud, res):

@@ -2,7 +2,7 @@
 
 import numpy as np
 
-from curvature.spatial_order import inverse_permutation, morton_order
+from curvature.pipeline.spatial_order import inverse_permutation, morton_order
 
 
 def test_morton_order_is_a_permutation_and_local():

@@ -6,8 +6,10 @@ import numpy as np
 import pytest
 
 import curvature
-from curvature import synthetic, tiling
-from curvature.pipeline import resolve_request
+from curvature import synthetic
+from curvature.pipeline import tiling
+from curvature.pipeline.block import compute_block
+from curvature.pipeline.request import resolve_request
 
 
 def assert_identical(a, b):
@@ -74,7 +76,7 @@ def test_tiles_are_identical_for_any_workers_and_order(torus):
 def test_reach_of_knn_is_the_kth_distance(torus):
     req = resolve_request(None, "knn", "monge", {"k": 12}, None, None, None, 1, 1000)
     spts = np.ascontiguousarray(torus[:2000])
-    block = curvature.pipeline.compute_block(spts, None, req, track_reach=True)
+    block = compute_block(spts, None, req, track_reach=True)
     d = np.linalg.norm(spts[:, None, :] - spts[None, :, :], axis=2)
     np.fill_diagonal(d, np.inf)
     np.testing.assert_allclose(block.reach, np.sort(d, axis=1)[:, 11], rtol=1e-12)
@@ -185,7 +187,7 @@ def test_executor_without_submit_is_a_parameter_error(torus):
 def test_a_tile_holds_every_point_within_each_core_points_room(seed):
     from scipy.spatial import cKDTree
 
-    from curvature.spatial_order import morton_order
+    from curvature.pipeline.spatial_order import morton_order
 
     rng = np.random.default_rng(seed)
     blobs = [rng.normal(c, 0.3, (3000, 3)) for c in ((0, 0, 0), (5, 1, 0), (2, 6, 3))]

@@ -3,14 +3,16 @@
 import csv
 import json
 from dataclasses import dataclass
+from importlib.metadata import entry_points
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 import curvature
-from curvature import evaluation, paper_study, synthetic
-from curvature.cli import build_parser, main
+from curvature import evaluation, synthetic
+from curvature.cli import PLUGIN_GROUP, build_parser, main
+from curvature.studies import paper as paper_study
 
 
 @dataclass
@@ -226,6 +228,11 @@ def test_density_csv_structure_and_values(tiny_study):
 # ---------------------------------------------------------------------------------------------
 # Command line
 # ---------------------------------------------------------------------------------------------
+
+
+def test_bench_is_a_plugin_of_the_cli():
+    names = {ep.name: ep.value for ep in entry_points(group=PLUGIN_GROUP)}
+    assert names.get("bench") == "curvature.studies.cli:register"
 
 
 def test_bench_parser_options():

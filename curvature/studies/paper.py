@@ -49,11 +49,11 @@ from pathlib import Path
 
 import numpy as np
 
-from . import synthetic
-from .evaluation import density_consistency, error_summary, point_errors, win_share
-from .io import read
-from .neighborhoods import FINDERS
-from .pipeline import estimate
+from .. import synthetic
+from ..evaluation import density_consistency, error_summary, point_errors, win_share
+from ..io import read
+from ..neighborhoods import FINDERS
+from ..pipeline import estimate
 
 __all__ = [
     "EXTRA_PAIRS",
@@ -101,7 +101,7 @@ Log = Callable[[str], None]
 
 def default_data_dir() -> Path:
     """The shared data folder next to the repository: ``<repo>/../shared/data``."""
-    return Path(__file__).resolve().parents[2] / "shared" / "data"
+    return Path(__file__).resolve().parents[3] / "shared" / "data"
 
 
 @dataclass(frozen=True)

@@ -6,7 +6,7 @@ patch and a cylinder. Estimators:
 
 * ``default``: ``curvature.estimate(points)`` with no parameter (method "auto");
 * ``paper``: ``preset="paper"`` (Territory Claiming, 10 neighbors, implicit quadric);
-* ``apss``: MeshLab's APSS (filter scale 8) through :mod:`curvature.reference_apss`, on normals
+* ``apss``: MeshLab's APSS (filter scale 8) through :mod:`curvature.studies.peers.apss`, on normals
   estimated from the points (pymeshlab's plane fit over 30 neighbors), run only when
   ``pymeshlab`` is installed (the ``bench`` extra). With these normals it reproduces the issue's
   APSS figures within about 10 %; given the exact normals APSS would be about twice as accurate,
@@ -39,8 +39,8 @@ from pathlib import Path
 
 import numpy as np
 
-from . import synthetic
-from .pipeline import estimate
+from .. import synthetic
+from ..pipeline import estimate
 
 #: Shape label -> (synthetic shape name, its keyword arguments).
 SHAPES: dict[str, tuple[str, dict]] = {
@@ -91,7 +91,7 @@ def _stderr(message: str) -> None:
 
 
 def apss_available() -> bool:
-    from .reference_apss import apss_available as available
+    from .peers.apss import apss_available as available
 
     return available()
 
@@ -105,7 +105,7 @@ def run_estimator(name: str, cloud, workers) -> tuple[np.ndarray, np.ndarray]:
         res = estimate(cloud.points, preset="paper", normals=cloud.normals, workers=workers)
         return res.k1, res.k2
     if name == "apss":
-        from .reference_apss import apss_curvature, estimate_normals
+        from .peers.apss import apss_curvature, estimate_normals
 
         # APSS fits to oriented normals; like ours they are estimated from the points, and
         # only their signs come from the exact normals.

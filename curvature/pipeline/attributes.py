@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .cloud import PointCloud
-from .result import CurvatureResult
+from ..cloud import PointCloud
+from ..result import CurvatureResult
 
 # Names a result's own fields (and their file columns) use; an input attribute with one of
 # these names is kept under ``input_<name>`` so neither hides the other.

@@ -56,7 +56,7 @@ point run took 34 to 150 s wall (83 s CPU) on the shared, loaded machine. The co
 Examples
 --------
 >>> from curvature import synthetic
->>> from curvature.reference_apss import apss_available, apss_curvature
+>>> from curvature.studies.peers.apss import apss_available, apss_curvature
 >>> cloud = synthetic.sphere(2000, radius=2.0)
 >>> if apss_available():  # doctest: +SKIP
 ...     k1, k2 = apss_curvature(cloud.points, cloud.normals)
@@ -69,8 +69,8 @@ import importlib.util
 import numpy as np
 from scipy.spatial import cKDTree
 
-from .errors import ParameterError
-from .orientation import ORIENT_K, signs_auto, signs_from_viewpoint
+from ...errors import ParameterError
+from ...orientation import ORIENT_K, signs_auto, signs_from_viewpoint
 
 __all__ = [
     "APSS_ORIENTATIONS",

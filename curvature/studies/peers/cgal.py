@@ -35,7 +35,7 @@ noise. The Monge degree is always 2 (only principal curvatures and directions ar
 Examples
 --------
 >>> from curvature import synthetic
->>> from curvature.reference_cgal import cgal_available, cgal_jet_curvature
+>>> from curvature.studies.peers.cgal import cgal_available, cgal_jet_curvature
 >>> cloud = synthetic.sphere(2000, radius=2.0)
 >>> if cgal_available():  # doctest: +SKIP
 ...     k1, k2, normals, status = cgal_jet_curvature(cloud.points, cloud.normals, degree=4)
@@ -53,7 +53,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import CurvatureInputError, ParameterError
+from ...errors import CurvatureInputError, ParameterError
 
 __all__ = [
     "CGAL_SOURCE",
@@ -65,7 +65,7 @@ __all__ = [
 ]
 
 #: The C++ driver, in the repository checkout.
-CGAL_SOURCE = Path(__file__).resolve().parent.parent / "benchmarks" / "cgal" / "jet_fitting.cpp"
+CGAL_SOURCE = Path(__file__).resolve().parents[3] / "benchmarks" / "cgal" / "jet_fitting.cpp"
 
 #: Jet degrees :func:`cgal_jet_curvature` accepts (the Monge degree is 2, so at least 2).
 JET_DEGREES = (2, 3, 4)

@@ -47,22 +47,22 @@ import numpy as np
 from numba import njit
 from scipy.spatial import cKDTree
 
-from .fitting import scale_selection
-from .fitting.kernels import FIT_IMPLICIT, FIT_MONGE, SOLVER_TAUBIN, fit_batch
-from .fitting.normal_field import (
+from ..fitting import scale_selection
+from ..fitting.kernels import FIT_IMPLICIT, FIT_MONGE, SOLVER_TAUBIN, fit_batch
+from ..fitting.normal_field import (
     N_TERMS,
     nfr_from_anchors,
     pca_normals,
 )
-from .fitting.normal_quadric import N_QUAD
-from .fitting.outliers import ISOLATION_K, isolated, off_surface
-from .fitting.scale_selection import KIND_MONGE, multiscale_anchor_fits
-from .fitting.shifted import adopt_neighbor_fits
-from .neighborhoods.kdtree import build_tree, knn_parallel
-from .params import ParamSpec
+from ..fitting.normal_quadric import N_QUAD
+from ..fitting.outliers import ISOLATION_K, isolated, off_surface
+from ..fitting.scale_selection import KIND_MONGE, multiscale_anchor_fits
+from ..fitting.shifted import adopt_neighbor_fits
+from ..neighborhoods.kdtree import build_tree, knn_parallel
+from ..params import ParamSpec
+from ..status import Status
+from ..uncertainty import ANCHORED_MEAN_SHARE, CLEAN_CALIBRATION, with_floor
 from .sampling import cell_ijk, grid_keys, thinned
-from .status import Status
-from .uncertainty import ANCHORED_MEAN_SHARE, CLEAN_CALIBRATION, with_floor
 
 # Neighbors of the spacing and noise measurements and of the clean-cloud fit.
 PLAN_K = 24

@@ -6,9 +6,9 @@ import csv
 
 import pytest
 
-from curvature import accuracy_study
-from curvature.accuracy_study import AccuracyConfig, run_accuracy, summary_markdown, verdicts
 from curvature.cli import main
+from curvature.studies import accuracy as accuracy_study
+from curvature.studies.accuracy import AccuracyConfig, run_accuracy, summary_markdown, verdicts
 
 
 def row(shape, noise, est, e1, e2, rel=0.001, seed=1):

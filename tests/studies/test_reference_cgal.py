@@ -1,4 +1,4 @@
-"""Tests for curvature.reference_cgal (CGAL's jet fitting as a benchmark reference).
+"""Tests for curvature.studies.peers.cgal (CGAL's jet fitting as a benchmark reference).
 
 Input checks and the missing-header path run everywhere; the fits are skipped with the reason
 when CGAL's headers or a C++ compiler are missing (``.ci/run`` installs them). Expected values
@@ -11,9 +11,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from curvature import reference_cgal, synthetic
+from curvature import synthetic
 from curvature.errors import CurvatureInputError, ParameterError
-from curvature.reference_cgal import (
+from curvature.studies.peers import cgal as reference_cgal
+from curvature.studies.peers.cgal import (
     CgalBuildError,
     build_cgal_jet,
     cgal_available,

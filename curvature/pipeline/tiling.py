@@ -31,11 +31,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .auto import plan_auto
-from .neighborhoods import make_finder
-from .neighborhoods.kdtree import build_tree
-from .orientation import ORIENT_K
-from .pipeline import DERIVED, Request, compute_block, empty_result, numba_threads
+from ..estimators.auto import plan_auto
+from ..neighborhoods import make_finder
+from ..neighborhoods.kdtree import build_tree
+from ..orientation import ORIENT_K
+from .block import DERIVED, compute_block, empty_result
+from .request import Request
+from .threads import numba_threads
 
 # Halo guesses in spacings (distance to the 24th neighbor); a wrong guess costs a recomputation,
 # never a wrong result.

@@ -1,6 +1,6 @@
 """Subsets of a cloud: grid cell keys (the default estimator's anchors, one point per cell) and
 an order-independent random thinning (its fits on clouds sampled far more densely than their
-noise: :class:`curvature.auto.AutoRun`).
+noise: :class:`curvature.estimators.auto.AutoRun`).
 """
 
 from __future__ import annotations

@@ -10,7 +10,7 @@ fillet, corner, edge zone, ...) the study reports mean, median and 99th percenti
 * ``default``: ``curvature.estimate(points)``;
 * ``apss``: MeshLab's APSS at filter scale 8 (when ``pymeshlab`` is installed);
 * ``jet24d4`` and ``jet96d2``: CGAL's ``Monge_via_jet_fitting`` over 24 neighbors at degree 4
-  and over 96 at degree 2 (when :mod:`curvature.reference_cgal` finds CGAL's headers).
+  and over 96 at degree 2 (when :mod:`curvature.studies.peers.cgal` finds CGAL's headers).
 
 Plots (``profile_<case>.png``): the estimated k1 (median per bin) against the signed distance
 from the nearest curvature jump, negative on the flat side and positive inside the fillet or
@@ -33,8 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
-from . import synthetic
-from .pipeline import estimate
+from .. import synthetic
+from ..pipeline import estimate
 
 Log = Callable[[str], None]
 
@@ -66,16 +66,16 @@ def available_estimators(requested=ESTIMATORS, log: Log = _stderr) -> list[str]:
     out = []
     for name in requested:
         if name == "apss":
-            from .reference_apss import apss_available
+            from .peers.apss import apss_available
 
             if not apss_available():
                 log("pymeshlab is not installed: APSS is left out (pip install 'curvature[bench]')")
                 continue
         if name.startswith("jet"):
             try:
-                from .reference_cgal import cgal_available
+                from .peers.cgal import cgal_available
             except ImportError:
-                log("curvature.reference_cgal is missing: CGAL jet fitting is left out")
+                log("curvature.studies.peers.cgal is missing: CGAL jet fitting is left out")
                 continue
             if not cgal_available():
                 log("CGAL's headers or a C++ compiler are missing: jet fitting is left out")
@@ -90,10 +90,10 @@ def run_estimator(name: str, cloud) -> tuple[np.ndarray, np.ndarray]:
         res = estimate(cloud.points, normals=cloud.normals)
         return res.k1, res.k2
     if name == "apss":
-        from .accuracy_study import run_estimator as accuracy_estimator
+        from .accuracy import run_estimator as accuracy_estimator
 
         return accuracy_estimator("apss", cloud, None)
-    from .reference_cgal import cgal_jet_curvature
+    from .peers.cgal import cgal_jet_curvature
 
     k, degree = {"jet24d4": (24, 4), "jet96d2": (96, 2)}[name]
     k1, k2, _, status = cgal_jet_curvature(cloud.points, cloud.normals, k=k, degree=degree)

@@ -1,4 +1,4 @@
-"""Tests for curvature.reference_apss (MeshLab's APSS as a benchmark reference).
+"""Tests for curvature.studies.peers.apss (MeshLab's APSS as a benchmark reference).
 
 The pymeshlab-backed tests are skipped when pymeshlab is missing (it is only in the ``bench``
 extra, so CI skips them). Expected values are closed forms written here: a sphere of radius
@@ -15,7 +15,7 @@ import pytest
 
 from curvature import synthetic
 from curvature.errors import ParameterError
-from curvature.reference_apss import apss_curvature, principal_from_mean_gauss
+from curvature.studies.peers.apss import apss_curvature, principal_from_mean_gauss
 
 
 @pytest.fixture(scope="module")
