@@ -40,8 +40,10 @@ def _undocumented(failures: list[Failure], case, response) -> list[Failure]:
     answer's text, as the script matches the CLI's report)."""
     left = []
     for failure in failures:
+        # A binary answer (LAS, NPZ, PLY) has no text; its bytes are decoded leniently.
+        body = response.content.decode("utf-8", "replace")
         text = (f"{failure.title}\n{failure.message}\nContent-Type: {case.media_type}\n"
-                f"[{response.status_code}] {response.text}")
+                f"[{response.status_code}] {body}")
         why = next((w for code, pattern, w in DOCUMENTED
                     if code == failure.code and re.search(pattern, text, re.S)), None)
         if why is None:
