@@ -37,7 +37,7 @@ def test_noise_free_shapes_within_issue_limits(shape, kwargs, limit):
     cloud = synthetic.make(shape, 10_000, seed=3, **kwargs)
     res = curvature.estimate(cloud.points, normals=cloud.normals)
     assert res.info["method"] == "auto" and res.info["fit"] == "implicit"
-    assert res.info["plan"]["clean"] and res.info["plan"]["noise"] < 0.01
+    assert res.info["plan"]["clean"] and res.info["plan"]["noise"] < 0.001
     rel = relative_errors(cloud, res)
     assert max(rel) <= limit, rel
     # 24 neighbors, 16 or 12 only where the 24-point fit is far from exact (none here mostly)
@@ -215,6 +215,20 @@ def test_grid_cells_choose_the_point_nearest_each_cell_centre():
     reps, owner = grid_cells(pts, np.zeros(3), 1.0)
     np.testing.assert_array_equal(reps, [1, 4])
     np.testing.assert_array_equal(owner, [0, 0, 0, 1, 1])
+
+
+@pytest.mark.parametrize("noise, model", [(0.02, "axis"), (0.05, "view"), (0.005, "axis")])
+def test_slightly_noisy_clouds_get_the_noisy_branch(noise, model):
+    """Noise far below what counted as noisy once (relative noise 0.0015 to 0.0075 against the
+    old threshold 0.01) wrecks the 24-point implicit quadric: on this sphere it read median
+    |k - 1| of 0.08 to 0.51; the normal fits read 0.006."""
+    cloud = synthetic.sphere(10_000, noise=noise, noise_model=model, seed=1)
+    res = curvature.estimate(cloud.points)
+    assert not res.info["plan"]["clean"] and res.info["plan"]["noise"] >= 0.001
+    err = 0.5 * (np.abs(res.k1 - 1.0) + np.abs(res.k2 - 1.0))
+    assert np.nanmedian(err) < 0.015 and np.nanmean(err) < 0.02
+    clean = curvature.estimate(cloud.points, noise_threshold=1.0)  # the implicit quadric
+    assert np.nanmedian(0.5 * (np.abs(clean.k1 - 1.0) + np.abs(clean.k2 - 1.0))) > 0.03
 
 
 def test_plan_measures_spacing_and_noise():
