@@ -301,25 +301,37 @@ def cubic_noise(points: np.ndarray, sample: np.ndarray, nbr: np.ndarray) -> np.n
     ndarray, shape (m,)
         In the points' length unit (NaN where the fit is degenerate).
     """
-    local = points[np.concatenate([sample[:, None], nbr], axis=1)]
-    local = local - local.mean(axis=1, keepdims=True)
-    _, axes = np.linalg.eigh(np.einsum("mki,mkj->mij", local, local))
-    frame = np.einsum("mki,mij->mkj", local, axes)  # column 0: along the normal
-    height, u, v = frame[..., 0], frame[..., 1], frame[..., 2]
-    radius = np.sqrt(np.mean(u * u + v * v, axis=1, keepdims=True))
-    radius[radius == 0] = 1.0
-    u, v = u / radius, v / radius
-    design = np.stack([np.ones_like(u), u, v, u * u, u * v, v * v, u ** 3, u * u * v,
-                       u * v * v, v ** 3], axis=-1)
-    gram = np.einsum("mki,mkj->mij", design, design)
-    rhs = np.einsum("mki,mk->mi", design, height)
-    terms = design.shape[-1]
-    ok = np.linalg.cond(gram) < 1e12
     rms = np.full(sample.shape[0], np.nan)
-    if ok.any():
-        coef = np.linalg.solve(gram[ok], rhs[ok][..., None])[..., 0]
-        resid = height[ok] - np.einsum("mki,mi->mk", design[ok], coef)
-        rms[ok] = np.sqrt(np.sum(resid * resid, axis=1) / (local.shape[1] - terms))
+    with np.errstate(all="ignore"):
+        local = points[np.concatenate([sample[:, None], nbr], axis=1)]
+        local = local - local.mean(axis=1, keepdims=True)
+        # Each neighborhood in units of its own size, so any coordinate range stays finite;
+        # one that overflows or has no extent gives NaN.
+        size = np.sqrt(np.mean(np.sum(local * local, axis=2), axis=1))
+        rows = np.flatnonzero(np.isfinite(size) & (size > 0))
+        local = local[rows] / size[rows, None, None]
+        try:
+            _, axes = np.linalg.eigh(np.einsum("mki,mkj->mij", local, local))
+        except np.linalg.LinAlgError:
+            return rms
+        frame = np.einsum("mki,mij->mkj", local, axes)  # column 0: along the normal
+        height, u, v = frame[..., 0], frame[..., 1], frame[..., 2]
+        radius = np.sqrt(np.mean(u * u + v * v, axis=1, keepdims=True))
+        radius[~(radius > 0)] = 1.0
+        u, v = u / radius, v / radius
+        design = np.stack([np.ones_like(u), u, v, u * u, u * v, v * v, u ** 3, u * u * v,
+                           u * v * v, v ** 3], axis=-1)
+        gram = np.einsum("mki,mkj->mij", design, design)
+        rhs = np.einsum("mki,mk->mi", design, height)
+        solvable = np.isfinite(gram).all(axis=(1, 2))
+        if solvable.any():
+            solvable[solvable] = np.linalg.cond(gram[solvable]) < 1e12
+        if solvable.any():
+            coef = np.linalg.solve(gram[solvable], rhs[solvable][..., None])[..., 0]
+            resid = height[solvable] - np.einsum("mki,mi->mk", design[solvable], coef)
+            dof = local.shape[1] - design.shape[-1]
+            rms[rows[solvable]] = (np.sqrt(np.sum(resid * resid, axis=1) / dof)
+                                   * size[rows[solvable]])
     return rms
 
 

@@ -269,3 +269,16 @@ def test_parameter_errors(kwargs, match):
     pts = synthetic.sphere(100, seed=14).points
     with pytest.raises(curvature.ParameterError, match=match):
         curvature.estimate(pts, **kwargs)
+
+
+def test_coordinates_spread_over_hundreds_of_orders_of_magnitude_do_not_raise():
+    """The API fuzzer's cloud: coordinates from 1e-300 to 1e284. The plan's cubic fits
+    overflowed into a LinAlgError (an HTTP 500); now such neighborhoods measure nothing and
+    every point gets a status."""
+    rng = np.random.default_rng(4)
+    pts = rng.choice([-1.0, 1.0], (28, 3)) * 10.0 ** rng.uniform(-300, 284, (28, 3))
+    pts[:8] = rng.normal(size=(8, 3)) * 1e16
+    res = curvature.estimate(pts)
+    assert len(res.status) == 28 and not res.info["plan"]["clean"]
+    ok = res.status == 0
+    assert np.isfinite(res.k1[ok]).all() and np.isnan(res.k1[~ok]).all()
