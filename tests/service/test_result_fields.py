@@ -54,6 +54,10 @@ def test_listing_has_the_json_results_fields_in_order_with_units(client, scan_jo
     assert entries["status"]["scale"] == "categorical"
     assert entries["status"]["categories"]["0"] == "ok"
     assert entries["shape_index"]["limits"] == [-1.0, 1.0]
+    # the standard errors (issue 16), for the viewer's "color by the standard error"
+    for name in ("k1_std", "k2_std", "mean_std"):
+        assert entries[name]["unit"] == "1/length unit" and entries[name]["scale"] == "sequential"
+    assert "uncertain" in entries
     # A scanner's camera frame: up is about -y (the table's normal, towards the sensor).
     assert np.dot(doc["up"], [0, -1, 0]) > 0.8 and np.isclose(np.linalg.norm(doc["up"]), 1)
 
