@@ -126,9 +126,34 @@ def read_npz(data: bytes, source=None) -> PointCloud:
     return cloud
 
 
+# A member is deflated when its first bytes deflate below this share of their size. Curvature,
+# coordinates and directions in float64 deflate by 3 to 14 % only, at about 30 MB/s (two
+# thirds of a 1M-point run's writing time); codes, counts and indices shrink 5- to 1000-fold.
+DEFLATE_BELOW = 0.8
+_PROBE_BYTES = 1 << 16
+
+
+def _pays_to_deflate(arr: np.ndarray) -> bool:
+    probe = np.ascontiguousarray(arr.reshape(-1)[:max(1, _PROBE_BYTES // max(arr.itemsize, 1))])
+    raw = probe.tobytes()
+    return len(raw) == 0 or len(zlib.compress(raw, 1)) < DEFLATE_BELOW * len(raw)
+
+
 def write_npz(fh: BinaryIO, table: Table) -> None:
-    """Write one compressed array per field (vectors as (n, 3)), plus ``faces``."""
+    """Write one array per field (vectors as (n, 3)), plus ``faces``, as ``np.savez`` does.
+
+    Members that compress (status codes, neighbor counts, indices) are deflated; float fields,
+    which barely do, are stored, so writing costs little more than the bytes. ``np.load``
+    reads both kinds.
+    """
     arrays = dict(table.fields)
     if table.faces is not None:
         arrays["faces"] = table.faces
-    np.savez_compressed(fh, **arrays)
+    with zipfile.ZipFile(fh, mode="w", allowZip64=True) as archive:
+        for name, values in arrays.items():
+            values = np.asanyarray(values)
+            member = zipfile.ZipInfo(name + ".npy", date_time=(1980, 1, 1, 0, 0, 0))
+            member.compress_type = (zipfile.ZIP_DEFLATED if _pays_to_deflate(values)
+                                    else zipfile.ZIP_STORED)
+            with archive.open(member, mode="w", force_zip64=True) as out:
+                npformat.write_array(out, values, allow_pickle=False)
