@@ -75,6 +75,14 @@ DOCUMENTED: tuple[tuple[str, str, str], ...] = (
      "cache busters or newer parameters); a case that drops the Authorization header gets it "
      "back from the harness, which sends the key with every request (the ignored_auth check "
      "tests authentication itself)"),
+    ("ST201", r"Invalid component:( in body)?(([ \t]*\n[ \t]*| )- (header: violates "
+              r"`required` \(was Authorization\)|query: violates `additionalProperties`|"
+              r"(body: )?violates `\w+` at \S*/allOf/\d+/anyOf/0\S*( \(was fit\))?))+"
+              r"[ \t]*(\n|\Z)([ \t]*\n|Content-Type:|\Z)",
+     "a fit-only parameter (solver, normal_k): the schema's anyOf admits it with a matching fit "
+     "(its first branch), with the parameter null, or with fit absent when the default fit "
+     "takes it; schemathesis breaks the first branch only (removes 'fit' or gives another "
+     "fit) and takes the request for invalid, while another branch still accepts it"),
     ("ST301", r'"status":"cancelled"',
      "DELETE of a queued or running job cancels it; the record stays readable as "
      "'cancelled' until it expires (DESIGN.md section 7)"),
