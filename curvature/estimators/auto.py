@@ -6,7 +6,8 @@ On noisy scans the neighborhood size decides the error far more than the fit mod
 1. **Plan** (:func:`plan_auto`): on a geometric subsample it measures the point spacing (median
    distance to the 24th neighbor) and the noise (median RMS residual of quadratic Monge fits
    over 24 neighbors), relative to that spacing.
-2. **Clean clouds** (relative noise below ``noise_threshold``): the paper's implicit quadric over
+2. **Clean clouds** (relative residual of cubic fits over 24 neighbors below
+   ``noise_threshold``, :func:`cubic_noise`): the paper's implicit quadric over
    24 neighbors, which is exact on quadrics and within a few 0.1 % elsewhere.
 3. **Noisy clouds**: normal fits over ``k`` neighbors, which average noise away. Stage-1 PCA
    normals (``normal_k`` neighbors) are fitted around *anchors*, one point per grid cell of 1.5
@@ -335,6 +336,12 @@ def cubic_noise(points: np.ndarray, sample: np.ndarray, nbr: np.ndarray) -> np.n
     return rms
 
 
+def _relative_median(residuals: np.ndarray, spacing: float) -> float:
+    """Median of the finite ``residuals`` over ``spacing``; inf when there is none."""
+    finite = residuals[np.isfinite(residuals)]
+    return float(np.median(finite)) / spacing if finite.size and spacing > 0 else np.inf
+
+
 def plan_auto(points: np.ndarray, tree: tuple, noise_threshold: float,
               dense_noise: float = np.inf) -> AutoPlan:
     """Measure spacing and noise on a geometric subsample of the cloud.
@@ -365,12 +372,11 @@ def plan_auto(points: np.ndarray, tree: tuple, noise_threshold: float,
             np.empty(m), np.empty(m, np.int8)]
     fit_batch(points, sample, indptr, indices, FIT_MONGE, SOLVER_TAUBIN, True, 0.0, *outs)
     residual = outs[5][outs[6] == Status.OK]
-    noise = float(np.median(residual)) / spacing if residual.size and spacing > 0 else np.inf
+    noise = _relative_median(residual, spacing)
     if not spacing > 0.0:  # every point coincides with its 24 nearest: any cell works
         spacing = coarse_cell(points, PLAN_CELLS)
     fine = cubic_noise(points, sample, indices.reshape(m, k)) if k >= 12 else residual
-    fine = fine[np.isfinite(fine)]
-    fine_noise = float(np.median(fine)) / spacing if fine.size and spacing > 0 else np.inf
+    fine_noise = _relative_median(fine, spacing)
     plan = AutoPlan(spacing=spacing, noise=noise, clean=bool(fine_noise < noise_threshold),
                     origin=tuple(float(v) for v in origin), cell=ANCHOR_CELL * spacing,
                     points=int(points.shape[0]), cubic_noise=fine_noise)
