@@ -1,9 +1,9 @@
 """Calibrate the standard errors of the default's scale selection on noisy smooth shapes.
 
-For every rung of the ladder (curvature.fitting.scale_selection) and the full-size fit, this
+For every rung of the ladder (curvature.fitting.scale_selection) and every top, this
 fits anchors of noisy planes, spheres and cylinders and compares the RMS error of k1 and k2 with
 the uncalibrated standard error d / (h^2 sqrt(s)) of the same fits. The ratio is the
-calibration constant of that rung's model (CALIBRATION in scale_selection.py).
+calibration constant of that rung (RUNGS and TOPS in scale_selection.py).
 
     python benchmarks/calibrate_scales.py [--n 20000] [--anchors 2000]
 """
@@ -18,12 +18,12 @@ from curvature import synthetic
 from curvature.estimators.auto import knn_csr
 from curvature.fitting.normal_field import nfr_anchor_fits_one, pca_normals
 from curvature.fitting.normal_quadric import N_QUAD
-from curvature.fitting.scale_selection import DEFAULT_KINDS, DEFAULT_LADDER, ladder_estimates
+from curvature.fitting.scale_selection import RUNGS, TOP_POINTS, TOPS, ladder_estimates
 from curvature.neighborhoods.kdtree import build_tree
 
 
-def rung_errors(cloud, anchors: int, k: int = 384, normal_k: int = 48, seed: int = 0):
-    """Per rung: (RMS error, RMS of d / (h^2 sqrt(s))) over anchors of ``cloud``."""
+def rung_errors(cloud, anchors: int, normal_k: int = 48, seed: int = 0):
+    """Per rung of pass 2 and per top: (RMS error, RMS of d / (h^2 sqrt(s))) over anchors."""
     pts = cloud.points
     tree = build_tree(pts)
     rng = np.random.default_rng(seed)
@@ -32,29 +32,35 @@ def rung_errors(cloud, anchors: int, k: int = 384, normal_k: int = 48, seed: int
     field = np.empty((pts.shape[0], 3))
     indptr, indices, _ = knn_csr(pts, tree, allq, normal_k)
     pca_normals(pts, allq, indptr, indices, field)
-    indptr, indices, _ = knn_csr(pts, tree, idx.astype(np.int64), k)
-    ladder = np.asarray(DEFAULT_LADDER, np.int64)
-    kinds = np.asarray(DEFAULT_KINDS, np.int64)
+    tops = [t[0] for t in TOPS["fit"]]
+    indptr, indices, _ = knn_csr(pts, tree, idx.astype(np.int64), max(tops))
+    ladder = np.asarray([r[0] for r in RUNGS["fit"]], np.int64)
+    kinds = np.asarray([r[1] for r in RUNGS["fit"]], np.int64)
     levels = ladder.size
-    err = [[] for _ in range(levels + 1)]
-    pred = [[] for _ in range(levels + 1)]
+    rows = levels + len(tops)
+    err = [[] for _ in range(rows)]
+    pred = [[] for _ in range(rows)]
     coef, quad, frame = np.empty((2, 10)), np.empty(N_QUAD), np.empty((3, 3))
     one = [np.empty(1), np.empty(1), np.empty(1, np.int8), np.empty(1), np.empty(1, np.int8)]
     for j, p in enumerate(idx):
         nbr = indices[indptr[j]:indptr[j + 1]]
-        quads, est = np.empty((levels, N_QUAD)), np.empty((levels + 1, 5))
+        quads, est = np.empty((levels, N_QUAD)), np.empty((rows, 5))
         ladder_estimates(pts, field, p, nbr, ladder, kinds, quads, est)
-        fk1, fk2, fd, fh = nfr_anchor_fits_one(pts, field, p, nbr, 0.7, coef, quad, frame, 0,
-                                               one[0], one[1], one[2], one[3], one[4])
-        est[levels] = (1.0 if one[4][0] == 0 else 0.0, fk1, fk2, fd, fh)
+        counts = list(ladder)
+        for t, size in enumerate(tops):
+            stride = max(1, size // TOP_POINTS)
+            sub = nbr[:size:stride]
+            fk1, fk2, fd, fh = nfr_anchor_fits_one(pts, field, p, sub, 0.7, coef, quad, frame,
+                                                   0, one[0], one[1], one[2], one[3], one[4])
+            est[levels + t] = (1.0 if one[4][0] == 0 else 0.0, fk1, fk2, fd, fh)
+            counts.append(sub.shape[0])
         sign = 1.0 if np.dot(field[p], cloud.normals[p]) >= 0 else -1.0
         t1, t2 = (cloud.k1[p], cloud.k2[p]) if sign > 0 else (-cloud.k2[p], -cloud.k1[p])
-        for li in range(levels + 1):
+        for li in range(rows):
             if est[li, 0] != 1.0:
                 continue
-            s = k if li == levels else ladder[li]
             err[li].append(np.hypot(est[li, 1] - t1, est[li, 2] - t2) / np.sqrt(2.0))
-            pred[li].append(est[li, 3] / (est[li, 4] ** 2 * np.sqrt(s)))
+            pred[li].append(est[li, 3] / (est[li, 4] ** 2 * np.sqrt(counts[li])))
     return [(float(np.sqrt(np.mean(np.square(e)))), float(np.sqrt(np.mean(np.square(q)))))
             for e, q in zip(err, pred, strict=True)]
 
@@ -64,8 +70,8 @@ def main() -> None:
     parser.add_argument("--n", type=int, default=20000)
     parser.add_argument("--anchors", type=int, default=1500)
     args = parser.parse_args()
-    names = [f"{s}/{'monge' if k == 0 else 'nquad'}" for s, k in
-             zip(DEFAULT_LADDER, DEFAULT_KINDS, strict=True)] + ["full/384"]
+    names = [f"{s}/{'monge' if k == 0 else 'nquad'}" for s, k, _ in RUNGS["fit"]]
+    names += [f"top/{s}" for s, _ in TOPS["fit"]]
     print("shape      noise  " + "  ".join(f"{n:>14}" for n in names))
     for shape in ("plane", "sphere", "cylinder"):
         for noise in (0.1, 0.25, 0.5):

@@ -70,16 +70,17 @@ PLAN_K = 24
 AUTO_PARAMS = (
     # k is the largest neighborhood; its floor is the smallest fit auto makes anyway (the
     # clean-cloud fit and the first scale rung), so every k it accepts is honoured as given.
-    ParamSpec("k", int, 384, PLAN_K, 1024,
+    ParamSpec("k", int, 768, PLAN_K, 4096,
               help="largest neighborhood of the curvature fits on noisy clouds, both passes: "
-                   "the fits over 24, 48, 96 and 192 neighbors below k compete with the one "
-                   "over k (scale_gamma); at least 24, the clean-cloud fit's size; lowered on "
-                   "small clouds (max_share)"),
+                   "the fits over 24, 48, 96, 192 and 384 neighbors below k compete with the "
+                   "one over k (scale_gamma); fits above 384 use every (size // 384)-th "
+                   "neighbor; at least 24, the clean-cloud fit's size; lowered on small "
+                   "clouds (max_share)"),
     ParamSpec("normal_k", int, 48, 12, 256, help="neighbors of the stage-1 PCA normals"),
     ParamSpec("max_share", float, 0.04, 0.0, 1.0,
-              help="largest share of the cloud's points one fit may use: on clouds of fewer "
-                   "than k / max_share points, k is lowered to max(48, max_share * points), never "
-                   "above k"),
+              help="share of the cloud's points that bounds the fits on small clouds: k is "
+                   "lowered to at most twice max(48, max_share * points), and a fit over "
+                   "max(48, max_share * points) neighbors is among the candidates"),
     ParamSpec("nfr_ratio", float, 0.7, 0.0, 1e6,
               help="the cubic normal field replaces the normal-constrained quadric at an anchor "
                    "where its normal misfit is below this fraction of the quadric's (0: quadric "
@@ -103,6 +104,8 @@ PLAN_CELLS = 64
 ANCHOR_CELL = 1.5
 # Fewest neighbors max_share lowers k to.
 SHARE_MIN_K = 48
+# The largest fit covers at most this many times max_share of the cloud.
+SHARE_TOPS = 2
 # Clean clouds: smaller implicit fits tried where the 24-neighbor one is not exact, the
 # residual (relative to spacing) below which a fit counts as exact, and how much larger than
 # the smallest residual the kept (largest) fit's may be.
@@ -488,12 +491,17 @@ class AutoRun:
             return
         self._anchored(res, field, radius[0], reps, owner, kc)
 
+    def share_k(self) -> int:
+        """``max_share`` of the cloud's points (at least 48)."""
+        return max(SHARE_MIN_K, int(self.params["max_share"] * self.plan.points))
+
     def fit_k(self) -> int:
-        """Neighbors of the noisy branch's fits: ``k``, lowered on small clouds so that one fit
-        never covers more than ``max_share`` of the cloud (there 384 neighbors would reach
-        around whole features, e.g. across a thin torus's tube; docs/accuracy.md section 8)."""
-        share = int(self.params["max_share"] * self.plan.points)
-        return min(self.params["k"], max(SHARE_MIN_K, share))
+        """Neighbors of the noisy branch's largest fits: ``k``, lowered on small clouds to
+        :data:`SHARE_TOPS` times :meth:`share_k`. Over a large share of a small cloud a fit
+        reaches around whole features (across a thin torus's tube; docs/accuracy.md section
+        8), so a fit over :meth:`share_k` neighbors is always among the tops it falls back to
+        (:func:`~curvature.fitting.scale_selection.pass_rungs`)."""
+        return min(self.params["k"], SHARE_TOPS * self.share_k())
 
     def _tick(self, count: int) -> None:
         self._done += count
@@ -770,13 +778,11 @@ class AutoRun:
         chosen = np.full(a, k, np.int64)
         sigma, bias = np.empty(a), np.empty(a)
         gamma = self.params["scale_gamma"]
-        kinds = np.asarray(scale_selection.DEFAULT_KINDS, np.int64)
-        rungs = np.flatnonzero((kinds != KIND_MONGE) | positional)
-        ladder = np.asarray(scale_selection.DEFAULT_LADDER, np.int64)[rungs]
-        calib = np.asarray(scale_selection.CALIBRATION, np.float64)[np.append(rungs, len(kinds))]
-        kinds = kinds[rungs]
+        ladder, kinds, tops, strides, calib = scale_selection.pass_rungs(
+            k, "fit" if positional else "refine", self.share_k())
         if gamma == 0.0:  # no ladder: every anchor keeps its fit over k neighbors
             ladder, kinds, calib = ladder[:0], kinds[:0], calib[-1:]
+            tops, strides = tops[-1:], strides[-1:]
         # Neighbor lists are k long: chunk by neighbor entries, not anchors, so a chunk holds
         # as many entries as a chunk of 24-neighbor queries would.
         step = max(64, self.chunk_size * 24 // max(k, 24))
@@ -785,7 +791,8 @@ class AutoRun:
             arrays = (coef[sl], scale[sl], frame[sl], quad[sl], quad_scale[sl], model[sl],
                       resid[sl], status[sl])
             multiscale_anchor_fits(self.points, field, anchors[sl], indptr, indices,
-                                   self.params["nfr_ratio"], ladder, kinds, gamma,
+                                   self.params["nfr_ratio"], ladder, kinds, tops, strides,
+                                   gamma,
                                    scale_selection.SIGMA_GROWTH, calib,
                                    *arrays, chosen[sl], sigma[sl], bias[sl])
             if reach is not None:

@@ -19,7 +19,7 @@ intersection of confidence intervals rule (Goldenshluger & Nemirovski, Math. Met
   ``sigma_s = calib_s * d_s / (h_s**2 * sqrt(s))``, with d_s the fit's RMS distance of its
   points to the fitted surface (noise plus whatever the model cannot follow) and h_s their RMS
   distance from the anchor: the error of a curvature read off a least-squares surface over s
-  points spread over radius h with residual d. ``calib_s`` (:data:`CALIBRATION`) makes sigma_s
+  points spread over radius h with residual d. ``calib_s`` (in :data:`RUNGS` and :data:`TOPS`) makes sigma_s
   the measured error on noisy planes and spheres (docs/accuracy.md);
 * the largest fit is kept whose k1 and k2 agree with those of every smaller fit within
   ``gamma (sigma_s + sigma_r)`` (Lepski's rule: its bias is not visible above the noise of
@@ -41,25 +41,39 @@ from .normal_field import nfr_anchor_fits_one, supported
 from .normal_quadric import N_QUAD, curvature_from_quadric, regress_normal_quadric
 from .quadric import OK, foot_point, sampson_rms, shape_operator
 
-__all__ = ["CALIBRATION", "DEFAULT_GAMMA", "DEFAULT_KINDS", "DEFAULT_LADDER", "KIND_MONGE",
-           "KIND_NORMAL_QUADRIC", "SIGMA_FLOOR", "ladder_estimates", "multiscale_anchor_fits",
-           "scale_sigma"]
+__all__ = ["DEFAULT_GAMMA", "KIND_MONGE", "KIND_NORMAL_QUADRIC", "RUNGS", "SIGMA_FLOOR", "TOPS", "ladder_estimates",
+           "multiscale_anchor_fits", "pass_rungs", "scale_sigma"]
 
 #: Rung models: a positional Monge quadric, or the normal-constrained quadric.
 KIND_MONGE = 0
 KIND_NORMAL_QUADRIC = 1
-#: Prefix sizes tried below the full neighborhood (only those smaller than it are used), and
-#: the model of each.
-DEFAULT_LADDER = (24, 48, 96, 192)
-DEFAULT_KINDS = (KIND_MONGE, KIND_MONGE, KIND_NORMAL_QUADRIC, KIND_NORMAL_QUADRIC)
+#: The rungs of each pass, ``(neighbors, model, calibration)``: prefix fits tried below the
+#: tops. The calibration is the standard error per unit of d / (h^2 sqrt(s)): RMS curvature
+#: error over that RMS measured on noisy planes, spheres and cylinders (0.1 to 0.5 % noise,
+#: 20,000 points; benchmarks/calibrate_scales.py), constant within about 15 % across shapes
+#: and noise; the Monge rungs' errors are larger than their residuals say because the fit sees
+#: few points per unknown. Pass 1 ("refine") only refines normals: Monge rungs would tilt them
+#: by their noisy curvature over a cell's width.
+RUNGS = {
+    "refine": ((96, KIND_NORMAL_QUADRIC, 1.9), (192, KIND_NORMAL_QUADRIC, 2.6)),
+    "fit": ((24, KIND_MONGE, 7.0), (48, KIND_MONGE, 5.8), (96, KIND_NORMAL_QUADRIC, 1.9),
+            (192, KIND_NORMAL_QUADRIC, 2.6)),
+}
+#: The default tops of each pass, ``(neighbors, calibration)``: full fits (both models)
+#: above the ladder. A top fits every ``stride``-th of its sorted neighbors, ``stride =
+#: max(1, size // TOP_POINTS)``: stage-1 normals of nearby points share most of their
+#: neighbors, so every second one of 768 carries nearly all their information (a
+#: 10,000-point sphere at 0.5 % noise: 0.0137 against 0.0133 with all 768) at the cost of a
+#: 384-neighbor fit. Calibrations as the rungs'; the strided top's is lower since its
+#: neighbors' normals are fewer than its patch's points, and set so that its standard errors
+#: match the errors of the results on noisy spheres (median error / 0.674 over the median
+#: standard error: 0.73 with 4.4, about 1 with 3.3).
+TOPS = {"refine": ((384, 4.4), (768, 3.3)), "fit": ((384, 4.4), (768, 3.3))}
+TOP_POINTS = 384
+#: A default top is kept below ``k`` only when it is at most this fraction of ``k``.
+TOP_GAP = 1.0 / 1.5
 #: Agreement tolerance in standard errors.
 DEFAULT_GAMMA = 5.0
-#: Standard error per unit of d / (h^2 sqrt(s)) of each rung, and of the full-size fit (last
-#: entry): RMS curvature error over that RMS measured on noisy planes, spheres and cylinders
-#: (0.1 to 0.5 % noise, 20,000 points; benchmarks/calibrate_scales.py). Constant within about
-#: 15 % across shapes and noise; the Monge rungs' errors are larger than their residuals say
-#: because the fit sees few points per unknown.
-CALIBRATION = (7.0, 5.8, 1.9, 2.6, 4.4)
 #: A fit whose sigma exceeds the smallest sigma below it by more than this is turned down.
 SIGMA_GROWTH = 2.0
 #: A kept fit's curvature farther than this many combined standard errors from a smaller
@@ -69,6 +83,49 @@ BIAS_SLACK = 1.5
 SIGMA_FLOOR = 1e-7
 # A foot point farther than this many fit units from the anchor means the fit missed it.
 FOOT_LIMIT = 2.0
+
+
+def pass_rungs(k: int, stage: str, field_limit: int | None = None) -> tuple[np.ndarray, ...]:
+    """The ladder and tops of one pass of an estimator whose largest fit is ``k``.
+
+    Tops: the default ones at most :data:`TOP_GAP` times ``k``, then ``k`` itself, plus one
+    at ``field_limit`` when ``k`` exceeds it and no top lies between ``TOP_GAP`` times it
+    and it (strides: :data:`TOP_POINTS`; calibration: that of the smallest default top not
+    below it, or of the largest). The top at ``field_limit`` is what a wider top
+    falls back to where it is turned down: without it, on a small torus, the next fit below
+    is a 192-neighbor quadric, biased there.
+
+    Parameters
+    ----------
+    k : int
+        The largest fit's neighbors.
+    stage : str
+        ``"refine"`` (pass 1) or ``"fit"`` (pass 2).
+    field_limit : int, optional
+        A size that must have a top of its own (default ``k``).
+
+    Returns
+    -------
+    ladder, kinds : ndarray, shape (l,), int64
+    tops, strides : ndarray, shape (t,), int64
+    calib : ndarray, shape (l + t,)
+        Of the rungs, then of the tops.
+    """
+    rungs, defaults = RUNGS[stage], TOPS[stage]
+    limit = k if field_limit is None else min(field_limit, k)
+    sizes = [t[0] for t in defaults if t[0] <= TOP_GAP * k] + [k]
+    if not any(TOP_GAP * limit <= size <= limit for size in sizes):
+        sizes = sorted(set(sizes) | {limit})
+    tops = []
+    for size in sizes:
+        calib = next((t[1] for t in defaults if t[0] >= size), defaults[-1][1])
+        tops.append((size, max(1, size // TOP_POINTS), calib))
+    ladder = [r for r in rungs if r[0] < tops[0][0]]
+    return (np.asarray([r[0] for r in ladder], np.int64),
+            np.asarray([r[1] for r in ladder], np.int64),
+            np.asarray([t[0] for t in tops], np.int64),
+            np.asarray([t[1] for t in tops], np.int64),
+            np.asarray([r[2] for r in ladder] + [t[2] for t in tops], np.float64))
 
 
 @njit(cache=True)
@@ -203,8 +260,8 @@ def _bias(est, sg, best):
 
 @njit(parallel=True, cache=True)
 def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, ladder, kinds,
-                           gamma, growth, calib, coef, scale, frame, quad, quad_scale, model,
-                           residual, status, chosen, sigma, bias):
+                           tops, strides, gamma, growth, calib, coef, scale, frame, quad,
+                           quad_scale, model, residual, status, chosen, sigma, bias):
     """Fits at anchors with the neighborhood size chosen per anchor (module docstring).
 
     Parameters
@@ -213,18 +270,24 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
         As for :func:`~curvature.fitting.normal_field.nfr_anchor_fits`; every anchor's
         neighbor list must be sorted by distance.
     ladder, kinds : ndarray, shape (l,), int64
-        Increasing neighbor counts (the anchor takes part besides) tried below the full list,
-        and their models.
+        Increasing neighbor counts (the anchor takes part besides) tried below the tops, and
+        their models.
+    tops, strides : ndarray, shape (t,), int64
+        Increasing neighbor counts of the full fits (both models, as ``nfr_anchor_fits``)
+        above the ladder, and the stride of each over the sorted list: a top of size s and
+        stride r fits every r-th of the s nearest neighbors (a wide patch at the cost of a
+        small fit). A top not below the list's length fits the whole list.
     gamma : float
         Agreement tolerance in standard errors.
     growth : float
         Largest ratio of a kept fit's sigma to the smallest sigma of the fits below it.
-    calib : ndarray, shape (l + 1,)
-        Standard-error calibration of every rung and of the full-size fit.
+    calib : ndarray, shape (l + t,)
+        Standard-error calibration of every rung and of every top.
     coef, scale, frame, quad, quad_scale, model, residual, status
         Outputs as for ``nfr_anchor_fits``: the kept model.
     chosen : ndarray, shape (a,), int64
-        Output: neighbors of the kept fit (the anchor takes part besides).
+        Output: neighbors of the kept fit (the anchor takes part besides): the patch's size,
+        strided tops included.
     sigma : ndarray, shape (a,)
         Output: the kept fit's standard error of curvature (inf when none was usable).
     bias : ndarray, shape (a,)
@@ -233,31 +296,76 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
         errors, over every usable smaller rung r (0 when none disagrees).
     """
     levels = ladder.shape[0]
+    ntop = tops.shape[0]
     for j in prange(anchors.shape[0]):
         p = anchors[j]
         nbr = indices[indptr[j]:indptr[j + 1]]
         full = nbr.shape[0]
         quads = np.empty((levels, N_QUAD))
-        est = np.empty((levels + 1, 5))
+        est = np.empty((levels + ntop, 5))
         ladder_estimates(points, field, p, nbr, ladder, kinds, quads, est)
-        # The full-size fit (both models), as without scale selection, is the last rung.
-        fk1, fk2, fd, fh = nfr_anchor_fits_one(points, field, p, nbr, nfr_ratio, coef[j],
-                                               quad[j], frame[j], j, scale, quad_scale, model,
-                                               residual, status)
-        usable = status[j] == OK and supported(fk1, fk2, fh)
-        est[levels, 0] = 1.0 if usable else 0.0
-        est[levels, 1], est[levels, 2], est[levels, 3], est[levels, 4] = fk1, fk2, fd, fh
-        chosen[j] = full
-        sigma[j] = np.inf
-        bias[j] = 0.0
-        sg = np.full(levels + 1, np.inf)
-        for li in range(levels + 1):
+        # Every top's full fit (both models) into scratch rows; the kept one is copied out.
+        t_coef = np.empty((ntop,) + coef.shape[1:])
+        t_quad = np.empty((ntop, N_QUAD))
+        t_frame = np.empty((ntop, 3, 3))
+        t_scale, t_qscale, t_resid = np.empty(ntop), np.empty(ntop), np.empty(ntop)
+        t_model, t_status = np.empty(ntop, np.int8), np.empty(ntop, np.int8)
+        sizes = np.empty(levels + ntop, np.int64)
+        sizes[:levels] = ladder
+        for t in range(ntop):
+            size = min(tops[t], full)
+            sizes[levels + t] = size
+            row = levels + t
+            est[row, 0] = 0.0
+            if t > 0 and size <= sizes[row - 1]:
+                t_status[t] = -1
+                continue  # the list is shorter than this top: the one below already fits it
+            if t > 0 and est[row - 1, 0] != 1.0:
+                # Where the smaller top failed or was not supported (duplicates, a line, an
+                # isolated cluster) a wider one fits whatever else it reaches: no wider top.
+                t_status[t] = -1
+                continue
+            sub = nbr[:size:strides[t]]
+            fk1, fk2, fd, fh = nfr_anchor_fits_one(points, field, p, sub, nfr_ratio, t_coef[t],
+                                                   t_quad[t], t_frame[t], t, t_scale,
+                                                   t_qscale, t_model, t_resid, t_status)
+            if t_status[t] == OK and supported(fk1, fk2, fh):
+                est[row, 0] = 1.0
+                est[row, 1], est[row, 2], est[row, 3], est[row, 4] = fk1, fk2, fd, fh
+        sg = np.full(levels + ntop, np.inf)
+        for li in range(levels + ntop):
             if est[li, 0] == 1.0:
-                s = full if li == levels else ladder[li]
+                s = sizes[li]
+                if li >= levels:
+                    s = (s + strides[li - levels] - 1) // strides[li - levels]
                 sg[li] = scale_sigma(est[li, 3], est[li, 4], s, calib[li])
         best = _lepski(est, sg, gamma, growth)
+        # The top to report when nothing is usable: the largest that fitted (its status
+        # stands), else the largest tried.
+        keep = ntop - 1
+        while keep > 0 and t_status[keep] != OK:
+            keep -= 1
+        if t_status[keep] != OK:
+            keep = ntop - 1
+            while keep > 0 and t_status[keep] == -1:
+                keep -= 1
+        if best >= levels:
+            keep = best - levels
+        for r in range(coef.shape[1]):
+            for c in range(coef.shape[2]):
+                coef[j, r, c] = t_coef[keep, r, c]
+        for r in range(N_QUAD):
+            quad[j, r] = t_quad[keep, r]
+        for r in range(3):
+            for c in range(3):
+                frame[j, r, c] = t_frame[keep, r, c]
+        scale[j], quad_scale[j], model[j] = t_scale[keep], t_qscale[keep], t_model[keep]
+        residual[j], status[j] = t_resid[keep], t_status[keep]
+        chosen[j] = sizes[levels + keep]
+        sigma[j] = np.inf
+        bias[j] = 0.0
         if best < 0:
-            continue  # nothing usable: the full fit's status stands
+            continue  # nothing usable: the largest top's status stands
         sigma[j] = sg[best]
         bias[j] = _bias(est, sg, best)
         if best < levels:

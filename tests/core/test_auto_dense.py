@@ -54,9 +54,9 @@ def test_switching_the_thinning_off_is_worse(dense_sphere, dense_result):
 
 def test_neighbor_count_reports_the_patch_in_points_of_the_cloud(dense_result):
     share = dense_result.info["plan"]["dense_share"]
-    # kept fits over 24 .. 384 thinned points span 24 / share .. 384 / share cloud points
+    # kept fits over 24 .. 768 thinned points span 24 / share .. 768 / share cloud points
     assert np.median(dense_result.neighbor_count) > 384
-    assert dense_result.neighbor_count.max() <= np.rint(384 / share)
+    assert dense_result.neighbor_count.max() <= np.rint(768 / share)
 
 
 def test_dense_runs_are_order_tile_and_power_of_two_scale_exact(dense_sphere):
