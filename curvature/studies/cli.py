@@ -23,13 +23,18 @@ def register(subparsers) -> None:
     bench.add_argument("study", choices=["paper", "accuracy", "parts"],
                        help="paper: the accuracy study of Khameneifar & Feng (2019); "
                             "accuracy: the default estimator against issue 6's targets, beside "
-                            "the paper preset and APSS (when pymeshlab is installed), then the "
-                            "part shapes; parts: the part shapes alone, per region, beside APSS "
+                            "the paper preset, APSS (when pymeshlab is installed) and CGAL's "
+                            "jet fitting at k = 24/96/384, degree 2/4 (when CGAL is installed; "
+                            "issue 23's ratio to the best setting), then the part shapes; "
+                            "parts: the part shapes alone, per region, beside APSS "
                             "and CGAL jet fitting (when installed)")
     bench.add_argument("--out", required=True, help="output folder")
-    bench.add_argument("--quick", action="store_true", help="reduced grid (about a minute)")
+    bench.add_argument("--quick", action="store_true",
+                       help="reduced grid (about a minute; accuracy with CGAL's jet grid: a "
+                            "few minutes)")
     bench.add_argument("--seeds", type=int, default=None,
-                       help="seeds per configuration (default: 3, quick: 2)")
+                       help="seeds per configuration (paper: 3, quick 2; "
+                            "accuracy: 2, quick 1)")
     bench.add_argument("--workers", type=int, default=None,
                        help="threads of each estimate (default: all cores)")
     bench.add_argument("--data", default=None,
@@ -38,6 +43,12 @@ def register(subparsers) -> None:
     bench.add_argument("--no-apss", action="store_true",
                        help="accuracy, parts: leave MeshLab's APSS out even if pymeshlab is "
                             "installed")
+    bench.add_argument("--no-jets", action="store_true",
+                       help="accuracy: leave CGAL's jet-fitting grid out even if CGAL is "
+                            "installed")
+    bench.add_argument("--noise-models", default=None,
+                       help="accuracy: comma-separated noise models of curvature.synthetic "
+                            "(default: axis,view)")
     bench.set_defaults(handler=cmd_bench)
 
 
@@ -72,6 +83,17 @@ def bench_accuracy(args) -> int:
         changes["seeds"] = tuple(range(1, args.seeds + 1))
     if args.no_apss:
         changes["estimators"] = ("default", "paper")
+    if args.no_jets:
+        changes["jets"] = ()
+    if args.noise_models is not None:
+        from ..synthetic import NOISE_MODELS
+
+        models = tuple(m.strip() for m in args.noise_models.split(",") if m.strip())
+        bad = [m for m in models if m not in NOISE_MODELS]
+        if not models or bad:
+            raise CurvatureInputError(f"--noise-models takes a comma-separated list of "
+                                      f"{', '.join(NOISE_MODELS)}; got {args.noise_models!r}")
+        changes["noise_models"] = models
     config = (accuracy_study.AccuracyConfig.quick if args.quick
               else accuracy_study.AccuracyConfig.full)(**changes)
     accuracy_study.run_accuracy(config, args.out)

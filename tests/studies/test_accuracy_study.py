@@ -20,18 +20,22 @@ def test_verdicts_take_the_worst_seed_and_both_limits():
     rows = [row("torus", 0.5, "default", 0.04, 0.05), row("torus", 0.5, "default", 0.045,
                                                           0.053, seed=2),
             row("sphere", 0.0, "default", 0.0, 0.0, rel=0.02),
-            row("sphere", 0.5, "default", 0.1, 0.1), row("sphere", 0.5, "apss", 0.3, 0.3)]
-    v = {(x["shape"], x["noise"]): x for x in verdicts(rows)}
+            row("sphere", 0.5, "default", 0.1, 0.1), row("sphere", 0.5, "apss", 0.3, 0.3),
+            {**row("sphere", 0.5, "default", 0.2, 0.2), "noise_model": "view"}]
+    v = {(x["shape"], x["noise"]): x for x in verdicts(rows) if x["noise_model"] == "axis"}
     assert v["torus", 0.5]["err_k2"] == 0.053 and not v["torus", 0.5]["passed"]
     assert not v["sphere", 0.0]["passed"]  # 2 % relative error without noise > 1 %
-    assert v["sphere", 0.5]["passed"]
+    assert v["sphere", 0.5]["passed"]  # the view row is a cell of its own
+    view = [x for x in verdicts(rows) if x["noise_model"] == "view"]
+    assert [(x["shape"], x["err_k1"], x["passed"]) for x in view] == [("sphere", 0.2, False)]
     table = summary_markdown(rows)
     assert "**missed**" in table and "0.300 / 0.300" in table
 
 
 def test_small_study_writes_its_files(tmp_path):
     config = AccuracyConfig(n_points=3000, noises=(0.0, 0.5), seeds=(1,),
-                            shapes=("torus", "cylinder"), estimators=("default", "paper"))
+                            shapes=("torus", "cylinder"), estimators=("default", "paper"),
+                            noise_models=("axis",), jets=())
     result = run_accuracy(config, tmp_path, log=lambda m: None)
     assert len(result["rows"]) == 2 * 2 * 2
     with open(tmp_path / "accuracy.csv") as fh:
@@ -48,12 +52,17 @@ def test_cli_runs_the_quick_study(tmp_path, monkeypatch):
     monkeypatch.setattr(accuracy_study.AccuracyConfig, "quick", classmethod(
         lambda cls, **changes: cls(**{"n_points": 2000, "noises": (0.3,), "seeds": (1,),
                                       "shapes": ("sphere",), **changes})))
-    assert main(["bench", "accuracy", "--out", str(tmp_path), "--quick", "--no-apss"]) == 0
+    assert main(["bench", "accuracy", "--out", str(tmp_path), "--quick", "--no-apss",
+                 "--no-jets", "--noise-models", "axis"]) == 0
     text = (tmp_path / "summary.md").read_text()
-    assert "sphere" in text and "apss" not in text
+    assert "sphere" in text and "apss" not in text and "view" not in text
+    assert not (tmp_path / "jets.csv").exists()
 
 
-@pytest.mark.parametrize("argv", [["bench", "accuracy", "--out", "x", "--seeds", "0"]])
-def test_cli_rejects_bad_seeds(argv, capsys):
+@pytest.mark.parametrize("argv, message", [
+    (["bench", "accuracy", "--out", "x", "--seeds", "0"], "--seeds must be >= 1"),
+    (["bench", "accuracy", "--out", "x", "--noise-models", "axis,laser"], "--noise-models"),
+])
+def test_cli_rejects_bad_options(argv, message, capsys):
     assert main(argv) == 2
-    assert "--seeds must be >= 1" in capsys.readouterr().err
+    assert message in capsys.readouterr().err
