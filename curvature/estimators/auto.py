@@ -57,7 +57,7 @@ from ..fitting.normal_field import (
 )
 from ..fitting.normal_quadric import N_QUAD
 from ..fitting.outliers import ISOLATION_K, isolated, off_surface
-from ..fitting.scale_selection import KIND_MONGE, multiscale_anchor_fits
+from ..fitting.scale_selection import multiscale_anchor_fits
 from ..fitting.shifted import adopt_neighbor_fits
 from ..neighborhoods.kdtree import build_tree, knn_parallel
 from ..params import ParamSpec

@@ -4,8 +4,9 @@ A fixed neighborhood size trades bias against noise once for the whole cloud: la
 average noise away on flat faces but blur fillets, corners and leading edges and reach across
 thin walls; small fits follow features but are noisy. Here every anchor fits Monge quadrics
 and normal-constrained quadrics (:mod:`curvature.fitting.normal_quadric`) on nested prefixes of
-its sorted neighbor list (the ``ladder``: 24, 48, 96, 192 neighbors) beside the full-size fit of
-:func:`~curvature.fitting.normal_field.nfr_anchor_fits`, and keeps one of them by the
+its sorted neighbor list (the ``ladder``: 24, 48, 96, 192 neighbors) beside the full fits of
+:func:`~curvature.fitting.normal_field.nfr_anchor_fits` (both models) over 384 and 768 (the
+``tops``; every second of the 768), and keeps one of them by the
 rule of Lepski (Lepski, Mammen & Spokoiny, Ann. Statist. 25 (1997)), the pairwise form of the
 intersection of confidence intervals rule (Goldenshluger & Nemirovski, Math. Methods Statist. 6
 (1997)):
@@ -19,8 +20,8 @@ intersection of confidence intervals rule (Goldenshluger & Nemirovski, Math. Met
   ``sigma_s = calib_s * d_s / (h_s**2 * sqrt(s))``, with d_s the fit's RMS distance of its
   points to the fitted surface (noise plus whatever the model cannot follow) and h_s their RMS
   distance from the anchor: the error of a curvature read off a least-squares surface over s
-  points spread over radius h with residual d. ``calib_s`` (in :data:`RUNGS` and :data:`TOPS`) makes sigma_s
-  the measured error on noisy planes and spheres (docs/accuracy.md);
+  points spread over radius h with residual d. ``calib_s`` (in :data:`RUNGS` and
+  :data:`TOPS`) makes sigma_s the measured error on noisy planes and spheres (docs/accuracy.md);
 * the largest fit is kept whose k1 and k2 agree with those of every smaller fit within
   ``gamma (sigma_s + sigma_r)`` (Lepski's rule: its bias is not visible above the noise of
   any smaller fit), and whose sigma is at most :data:`SIGMA_GROWTH` times the smallest below
@@ -41,8 +42,8 @@ from .normal_field import nfr_anchor_fits_one, supported
 from .normal_quadric import N_QUAD, curvature_from_quadric, regress_normal_quadric
 from .quadric import OK, foot_point, sampson_rms, shape_operator
 
-__all__ = ["DEFAULT_GAMMA", "KIND_MONGE", "KIND_NORMAL_QUADRIC", "RUNGS", "SIGMA_FLOOR", "TOPS", "ladder_estimates",
-           "multiscale_anchor_fits", "pass_rungs", "scale_sigma"]
+__all__ = ["DEFAULT_GAMMA", "KIND_MONGE", "KIND_NORMAL_QUADRIC", "RUNGS", "SIGMA_FLOOR", "TOPS",
+           "ladder_estimates", "multiscale_anchor_fits", "pass_rungs", "scale_sigma"]
 
 #: Rung models: a positional Monge quadric, or the normal-constrained quadric.
 KIND_MONGE = 0
