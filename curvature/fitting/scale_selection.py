@@ -75,6 +75,8 @@ TOP_POINTS = 384
 TOP_GAP = 1.0 / 1.5
 #: Agreement tolerance in standard errors.
 DEFAULT_GAMMA = 5.0
+#: Agreement a wider top needs with the top below it, in combined standard errors.
+TOP_AGREEMENT = 1.5
 #: A fit whose sigma exceeds the smallest sigma below it by more than this is turned down.
 SIGMA_GROWTH = 2.0
 #: A kept fit's curvature farther than this many combined standard errors from a smaller
@@ -216,10 +218,13 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out):
 
 
 @njit(cache=True)
-def _lepski(est, sg, gamma, growth):
+def _lepski(est, sg, gamma, growth, first_top):
     """Index of the fit to keep: the largest whose k1 and k2 agree with those of every smaller
     fit within ``gamma`` times the sum of both sigmas, and whose sigma is at most ``growth``
-    times the smallest sigma below it (-1 when none is usable).
+    times the smallest sigma below it (-1 when none is usable). A top above the first
+    (index above ``first_top``) must also agree with the top just below it within
+    :data:`TOP_AGREEMENT` times their combined sigma: the two fit the same model to nested
+    patches, so their noise is shared and a small difference already shows a bias.
 
     Each candidate is compared with every smaller rung directly, not with a running
     intersection, so one chance disagreement between two noisy small fits does not stop the
@@ -241,6 +246,10 @@ def _lepski(est, sg, gamma, growth):
             if abs(est[c, 1] - est[r, 1]) > tol or abs(est[c, 2] - est[r, 2]) > tol:
                 agrees = False
                 break
+        if agrees and c > first_top and np.isfinite(sg[c - 1]):
+            tol = TOP_AGREEMENT * np.sqrt(sg[c] * sg[c] + sg[c - 1] * sg[c - 1])
+            if abs(est[c, 1] - est[c - 1, 1]) > tol or abs(est[c, 2] - est[c - 1, 2]) > tol:
+                agrees = False
         if agrees and sg[c] <= growth * smallest:
             return c
     return -1
@@ -340,7 +349,7 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
                 if li >= levels:
                     s = (s + strides[li - levels] - 1) // strides[li - levels]
                 sg[li] = scale_sigma(est[li, 3], est[li, 4], s, calib[li])
-        best = _lepski(est, sg, gamma, growth)
+        best = _lepski(est, sg, gamma, growth, levels)
         # The top to report when nothing is usable: the largest that fitted (its status
         # stands), else the largest tried.
         keep = ntop - 1
