@@ -32,9 +32,9 @@ def test_an_upload_without_a_method_is_the_default_method(client):
 
 @pytest.mark.parametrize("params, detail", [
     ({"k": 10}, "params.k: method 'auto': parameter 'k' must be >= 24, got 10; allowed: 24 to "
-                "1024"),
-    ({"k": 2000}, "params.k: method 'auto': parameter 'k' must be <= 1024, got 2000; allowed: "
-                  "24 to 1024"),
+                "4096"),
+    ({"k": 5000}, "params.k: method 'auto': parameter 'k' must be <= 4096, got 5000; allowed: "
+                  "24 to 4096"),
     ({"method": "knn", "k": 0}, "params.k: method 'knn': parameter 'k' must be >= 5, got 0"),
     ({"method": "knn", "k": 5.5},
      "params.k: method 'knn': parameter 'k' must be a whole number, got 5.5"),
