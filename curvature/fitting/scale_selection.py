@@ -88,13 +88,13 @@ SIGMA_FLOOR = 1e-7
 FOOT_LIMIT = 2.0
 
 
-def pass_rungs(k: int, stage: str, field_limit: int | None = None) -> tuple[np.ndarray, ...]:
+def pass_rungs(k: int, stage: str, fallback: int | None = None) -> tuple[np.ndarray, ...]:
     """The ladder and tops of one pass of an estimator whose largest fit is ``k``.
 
     Tops: the default ones at most :data:`TOP_GAP` times ``k``, then ``k`` itself, plus one
-    at ``field_limit`` when ``k`` exceeds it and no top lies between ``TOP_GAP`` times it
+    at ``fallback`` when ``k`` exceeds it and no top lies between ``TOP_GAP`` times it
     and it (strides: :data:`TOP_POINTS`; calibration: that of the smallest default top not
-    below it, or of the largest). The top at ``field_limit`` is what a wider top
+    below it, or of the largest). The top at ``fallback`` is what a wider top
     falls back to where it is turned down: without it, on a small torus, the next fit below
     is a 192-neighbor quadric, biased there.
 
@@ -104,7 +104,7 @@ def pass_rungs(k: int, stage: str, field_limit: int | None = None) -> tuple[np.n
         The largest fit's neighbors.
     stage : str
         ``"refine"`` (pass 1) or ``"fit"`` (pass 2).
-    field_limit : int, optional
+    fallback : int, optional
         A size that must have a top of its own (default ``k``).
 
     Returns
@@ -115,7 +115,7 @@ def pass_rungs(k: int, stage: str, field_limit: int | None = None) -> tuple[np.n
         Of the rungs, then of the tops.
     """
     rungs, defaults = RUNGS[stage], TOPS[stage]
-    limit = k if field_limit is None else min(field_limit, k)
+    limit = k if fallback is None else min(fallback, k)
     sizes = [t[0] for t in defaults if t[0] <= TOP_GAP * k] + [k]
     if not any(TOP_GAP * limit <= size <= limit for size in sizes):
         sizes = sorted(set(sizes) | {limit})
@@ -350,15 +350,11 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
                     s = (s + strides[li - levels] - 1) // strides[li - levels]
                 sg[li] = scale_sigma(est[li, 3], est[li, 4], s, calib[li])
         best = _lepski(est, sg, gamma, growth, levels)
-        # The top to report when nothing is usable: the largest that fitted (its status
-        # stands), else the largest tried.
+        # The top to report when nothing is usable: the largest that fitted, else the first
+        # (its status stands; a wider top is only tried where the one below it was usable).
         keep = ntop - 1
         while keep > 0 and t_status[keep] != OK:
             keep -= 1
-        if t_status[keep] != OK:
-            keep = ntop - 1
-            while keep > 0 and t_status[keep] == -1:
-                keep -= 1
         if best >= levels:
             keep = best - levels
         for r in range(coef.shape[1]):
