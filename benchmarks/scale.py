@@ -2,7 +2,8 @@
 
 Generates a noisy torus (not committed), saves it as .npy, then runs ``curvature estimate`` on
 it in a child process per worker count and reports wall time, points per second and the
-child's peak resident memory.
+child's peak resident memory. CGAL's jet fitting (degree 2, k = 96) then runs on the same cloud
+with the last worker count, and the ratio of the two rates is printed (``jet_reference.py``).
 
 Usage::
 
@@ -25,6 +26,7 @@ import tempfile
 import time
 
 import numpy as np
+from jet_reference import ratio_line, time_cgal_jet
 
 from curvature import synthetic
 
@@ -55,6 +57,8 @@ def main() -> None:
     ap.add_argument("--dask", type=int, default=0, metavar="N",
                     help="also run the tiles on a LocalCluster of N workers")
     ap.add_argument("--tile-points", type=int, default=250_000)
+    ap.add_argument("--no-cgal", action="store_true",
+                    help="skip CGAL's jet fitting (degree 2, k = 96) on the same cloud")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
         src = os.path.join(tmp, "cloud.npy")
@@ -62,18 +66,25 @@ def main() -> None:
         np.save(src, synthetic.torus(args.n, noise=args.noise, seed=1).points)
         print(f"# {args.n:,} point torus, noise {args.noise}% BBD, generated in "
               f"{time.perf_counter() - t:.1f} s; {os.cpu_count()} cores", flush=True)
+        walls = {}
         for workers in args.workers:
             out = os.path.join(tmp, "result.npz")
             cli = ["estimate", src, "-o", out, "--workers", str(workers), "-q"]
             if args.method:
                 cli += ["--method", args.method]
             wall, peak = run_cli(cli)
+            walls[workers] = wall
             print(f"workers {workers}: {wall:.1f} s, {args.n / wall:,.0f} points/s, peak RSS "
                   f"{peak / 2**30:.2f} GiB ({peak / args.n:.0f} B/point)", flush=True)
             if args.dask and workers == args.workers[-1]:
                 with np.load(out) as npz:
                     reference = npz["k1"]
             os.remove(out)
+        if not args.no_cgal:
+            workers = args.workers[-1]
+            cgal_s, label = time_cgal_jet(np.load(src), workers)
+            print(f"workers {workers}, " + ratio_line(args.n, walls[workers], cgal_s, label)
+                  + " (ours: the CLI's wall time, reading and writing included)", flush=True)
         if args.dask:
             compare_executors(np.load(src), args.method, args.dask, args.tile_points, reference)
 

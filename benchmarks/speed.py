@@ -9,6 +9,9 @@ Usage::
     python benchmarks/speed.py                 # 100k-point noisy torus, every configuration
     python benchmarks/speed.py --n 200000 --repeat 7
     python benchmarks/speed.py --million       # also peak memory per point at 1M points
+
+The default's points per second are printed beside CGAL's jet fitting (degree 2, k = 96) timed on
+the same cloud in the same run (``jet_reference.py``; skipped with the reason without CGAL).
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ import tempfile
 import time
 
 import numpy as np
+from jet_reference import ratio_line, time_cgal_jet
 
 import curvature
 from curvature import synthetic
@@ -142,6 +146,10 @@ def main() -> None:
         size = f"  mean size {r['mean_size']:.1f}" if "mean_size" in r else ""
         print(f"{r['what']:52} {r['first_s']:8.3f} {r['median_s']:8.3f}  {stages}{size}")
     print("\n".join(speed_ratios(rows)))
+    auto_s = next(r["median_s"] for r in rows if r["what"].strip() == "estimate auto")
+    print(f"default (auto): {args.n / auto_s:,.0f} points/s")
+    cgal_s, label = time_cgal_jet(cloud.points, args.workers, args.repeat)
+    print(ratio_line(args.n, auto_s, cgal_s, label))
     if args.million:
         with tempfile.TemporaryDirectory() as tmp:
             path = os.path.join(tmp, "cloud.npy")
