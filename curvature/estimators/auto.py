@@ -632,6 +632,9 @@ class AutoRun:
         """Two passes of anchored normal fits over ``kc`` neighbors of every anchor, read at
         every point."""
         fits, fit_reach, chosen, err = self._model(field, r_normal, reps, owner, kc)
+        # The reads below need only the fits: the tree (40 bytes a point) goes before the
+        # result pages they fill are touched.
+        self.tree = None
         query = np.arange(self.points.shape[0], dtype=np.int64)
         t0 = time.perf_counter()
         for sl in self._chunks(query.shape[0]):
@@ -675,6 +678,7 @@ class AutoRun:
         self._total += 2 * reps.shape[0]
         fits, fit_reach, chosen, err = inner._model(field, r_normal, reps, owner,
                                                     min(inner.fit_k(), ns - 1))
+        self.tree = inner.tree = None  # as in _anchored: the reads need only the fits
         for name, sec in inner.timings.items():
             self.timings[f"dense {name}"] = sec
         t0 = time.perf_counter()
@@ -803,8 +807,10 @@ class AutoRun:
         return (coef, scale, frame, quad, quad_scale, model, resid, status), reach, chosen, err
 
     def _refined_field(self, field, anchors, owner, fits):
-        """First-pass normals at every point, computed in chunks (``field`` where failed)."""
-        refined = field.copy()
+        """First-pass normals at every point, computed in chunks and written into ``field``
+        (which keeps its normal where the read failed); the reads use only the fits, so
+        refining in place changes nothing and holds one field instead of two."""
+        refined = field
         n = self.points.shape[0]
         for sl in self._chunks(n):
             query = np.arange(sl.start, sl.stop, dtype=np.int64)

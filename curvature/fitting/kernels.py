@@ -27,6 +27,7 @@ from .quadric import (
     TOO_FEW,
     clear_outputs,
     foot_point,
+    gradient_at,
     sampson_rms,
     shape_operator,
     store_outputs,
@@ -308,7 +309,7 @@ def fit_batch(points, query, indptr, indices, fit, solver, include_self, clean_r
         if not found:
             status[j] = NO_FOOT
             continue
-        g = 2.0 * (a @ x0) + b
+        g = gradient_at(a, b, x0)
         c1, c2, n, d1, d2 = shape_operator(g, 2.0 * a)
         res = rel * scale
         c1 /= scale

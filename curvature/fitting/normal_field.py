@@ -18,17 +18,21 @@ import numpy as np
 from numba import njit, prange
 
 from .kernels import gather_local, principal_axes
-from .linalg import cholesky, solve_lower, solve_upper_t
-from .normal_quadric import curvature_from_quadric, regress_normal_quadric
+from .linalg import cholesky, dot, solve_lower, solve_upper_t, total
+from .normal_quadric import (
+    curvature_from_quadric,
+    quadric_curvature_xyz,
+    regress_normal_quadric,
+)
 from .quadric import (
     DEGENERATE,
     NON_FINITE,
     OK,
     TOO_FEW,
     clear_outputs,
-    store_outputs,
+    eigen2,
+    store_xyz,
     tangent_basis,
-    tangent_eigen,
 )
 
 # Constant, 2 linear, 3 quadratic and 4 cubic monomials of the tangent coordinates.
@@ -81,42 +85,19 @@ def pca_normals(points, query, indptr, indices, out):
 
 
 @njit(cache=True)
-def _terms(u1, u2, row):
-    row[0] = 1.0
-    row[1] = u1
-    row[2] = u2
-    row[3] = u1 * u1
-    row[4] = u1 * u2
-    row[5] = u2 * u2
-    row[6] = u1 * u1 * u1
-    row[7] = u1 * u1 * u2
-    row[8] = u1 * u2 * u2
-    row[9] = u2 * u2 * u2
-
-
-@njit(cache=True)
-def _d_terms(u1, u2, d1, d2):
-    """Derivatives of :func:`_terms` with respect to u1 (into ``d1``) and u2 (``d2``)."""
-    d1[0] = 0.0
-    d1[1] = 1.0
-    d1[2] = 0.0
-    d1[3] = 2.0 * u1
-    d1[4] = u2
-    d1[5] = 0.0
-    d1[6] = 3.0 * u1 * u1
-    d1[7] = 2.0 * u1 * u2
-    d1[8] = u2 * u2
-    d1[9] = 0.0
-    d2[0] = 0.0
-    d2[1] = 0.0
-    d2[2] = 1.0
-    d2[3] = 0.0
-    d2[4] = u1
-    d2[5] = 2.0 * u2
-    d2[6] = 0.0
-    d2[7] = u1 * u1
-    d2[8] = 2.0 * u1 * u2
-    d2[9] = 3.0 * u2 * u2
+def _terms_into(u1, u2, cols, i):
+    """The monomials 1, u1, u2, u1^2, u1 u2, u2^2, u1^3, u1^2 u2, u1 u2^2, u2^3 of one point,
+    into column ``i`` of ``cols`` (N_TERMS, m)."""
+    cols[0, i] = 1.0
+    cols[1, i] = u1
+    cols[2, i] = u2
+    cols[3, i] = u1 * u1
+    cols[4, i] = u1 * u2
+    cols[5, i] = u2 * u2
+    cols[6, i] = u1 * u1 * u1
+    cols[7, i] = u1 * u1 * u2
+    cols[8, i] = u1 * u2 * u2
+    cols[9, i] = u2 * u2 * u2
 
 
 @njit(cache=True)
@@ -136,7 +117,7 @@ def regress_normals(points, field, p, nbr, include_self, coef):
         Whether p takes part in the fit.
     coef : ndarray, shape (2, N_TERMS)
         Output: coefficients of the two tangent normal components in the monomials of
-        ``u / h`` (:func:`_terms`).
+        ``u / h`` (:func:`_terms_into`).
 
     Returns
     -------
@@ -163,11 +144,11 @@ def regress_normals(points, field, p, nbr, include_self, coef):
         return DEGENERATE, 0.0, t1, t2, np.nan, np.nan
     t1, t2 = tangent_basis(n_p)
     # Tangent coordinates, tangent normal components (neighbor normals flipped to agree with
-    # p's) and heights of the fitted points; p itself is row 0 when included.
-    uv = np.empty((m, 2))
-    g = np.empty((m, 2))
+    # p's) and heights of the fitted points, one row per quantity so the sums below run over
+    # contiguous memory; p itself is column 0 when included.
+    uv = np.empty((2, m))
+    g = np.empty((2, m))
     hgt = np.empty(m)
-    row = np.empty(N_TERMS)
     ok_pts = 0
     # Scalars throughout: this loop runs a few hundred times per fit and must not allocate.
     px, py, pz = points[p, 0], points[p, 1], points[p, 2]
@@ -181,28 +162,29 @@ def regress_normals(points, field, p, nbr, include_self, coef):
         dy = points[q, 1] - py
         dz = points[q, 2] - pz
         s = 1.0 if qx * nx + qy * ny + qz * nz >= 0.0 else -1.0
-        uv[ok_pts, 0] = dx * t1[0] + dy * t1[1] + dz * t1[2]
-        uv[ok_pts, 1] = dx * t2[0] + dy * t2[1] + dz * t2[2]
-        g[ok_pts, 0] = s * (qx * t1[0] + qy * t1[1] + qz * t1[2])
-        g[ok_pts, 1] = s * (qx * t2[0] + qy * t2[1] + qz * t2[2])
+        uv[0, ok_pts] = dx * t1[0] + dy * t1[1] + dz * t1[2]
+        uv[1, ok_pts] = dx * t2[0] + dy * t2[1] + dz * t2[2]
+        g[0, ok_pts] = s * (qx * t1[0] + qy * t1[1] + qz * t1[2])
+        g[1, ok_pts] = s * (qx * t2[0] + qy * t2[1] + qz * t2[2])
         hgt[ok_pts] = dx * nx + dy * ny + dz * nz
         ok_pts += 1
     if ok_pts < MIN_POINTS_NFR:
         return TOO_FEW, 0.0, t1, t2, np.nan, np.nan
-    h = np.sqrt(np.sum(uv[:ok_pts] ** 2) / ok_pts)
+    h = np.sqrt((dot(uv[0], uv[0], ok_pts) + dot(uv[1], uv[1], ok_pts)) / ok_pts)
     if not h > 0.0:
         return DEGENERATE, 0.0, t1, t2, np.nan, np.nan
-    ata = np.zeros((N_TERMS, N_TERMS))
-    atg = np.zeros((N_TERMS, 2))
+    # The design matrix by columns (one monomial per row of `cols`): its Gram matrix is then
+    # dot products of contiguous vectors.
+    cols = np.empty((N_TERMS, ok_pts))
     for i in range(ok_pts):
-        _terms(uv[i, 0] / h, uv[i, 1] / h, row)
-        for r in range(N_TERMS):
-            atg[r, 0] += row[r] * g[i, 0]
-            atg[r, 1] += row[r] * g[i, 1]
-            for c in range(r, N_TERMS):
-                ata[r, c] += row[r] * row[c]
+        _terms_into(uv[0, i] / h, uv[1, i] / h, cols, i)
+    ata = np.empty((N_TERMS, N_TERMS))
+    atg = np.empty((N_TERMS, 2))
     for r in range(N_TERMS):
-        for c in range(r + 1, N_TERMS):
+        atg[r, 0] = dot(cols[r], g[0], ok_pts)
+        atg[r, 1] = dot(cols[r], g[1], ok_pts)
+        for c in range(r, N_TERMS):
+            ata[r, c] = dot(cols[r], cols[c], ok_pts)
             ata[c, r] = ata[r, c]
     l, good = cholesky(ata, 1e-12)
     if not good:
@@ -214,69 +196,75 @@ def regress_normals(points, field, p, nbr, include_self, coef):
         coef[1, r] = beta1[r]
     # d(normal_a)/d(u_b) = coef[a, 1 + b] / h at p; heights against the osculating paraboloid
     # w = w0 - u'Su/2 of its symmetric part (w0 fitted as a mean).
-    s11 = beta0[1] / h
-    s22 = beta1[2] / h
+    s11 = 0.5 * beta0[1] / h
+    s22 = 0.5 * beta1[2] / h
     s12 = 0.5 * (beta0[2] + beta1[1]) / h
-    off = 0.0
+    dev = np.empty(ok_pts)
     for i in range(ok_pts):
-        u1, u2 = uv[i, 0], uv[i, 1]
-        off += hgt[i] + 0.5 * (s11 * u1 * u1 + 2.0 * s12 * u1 * u2 + s22 * u2 * u2)
-    off /= ok_pts
-    ss = 0.0
-    mis = 0.0
+        u1, u2 = uv[0, i], uv[1, i]
+        dev[i] = hgt[i] + s11 * u1 * u1 + s12 * u1 * u2 + s22 * u2 * u2
+    off = total(dev, ok_pts) / ok_pts
     for i in range(ok_pts):
-        u1, u2 = uv[i, 0], uv[i, 1]
-        dev = hgt[i] + 0.5 * (s11 * u1 * u1 + 2.0 * s12 * u1 * u2 + s22 * u2 * u2) - off
-        ss += dev * dev
-        _terms(u1 / h, u2 / h, row)
-        r0 = g[i, 0]
-        r1 = g[i, 1]
-        for r in range(N_TERMS):
-            r0 -= beta0[r] * row[r]
-            r1 -= beta1[r] * row[r]
-        mis += r0 * r0 + r1 * r1
-    return OK, h, t1, t2, np.sqrt(ss / ok_pts), mis / ok_pts
+        dev[i] -= off
+    # Residuals of the fitted tangent normal components, a monomial at a time.
+    r0 = g[0, :ok_pts].copy()
+    r1 = g[1, :ok_pts].copy()
+    for r in range(N_TERMS):
+        b0, b1 = beta0[r], beta1[r]
+        for i in range(ok_pts):
+            r0[i] -= b0 * cols[r, i]
+            r1[i] -= b1 * cols[r, i]
+    mis = dot(r0, r0, ok_pts) + dot(r1, r1, ok_pts)
+    return OK, h, t1, t2, np.sqrt(dot(dev, dev, ok_pts) / ok_pts), mis / ok_pts
 
 
 @njit(cache=True)
 def curvature_from_field(coef, h, n_p, t1, t2, u1, u2, j, k1, k2, normals, dir1, dir2):
     """Write the curvature of a fitted normal field at tangent position ``(u1, u2)``.
 
-    The field is ``n_p + g1 t1 + g2 t2`` with ``g_a = coef[a] . terms(u / h)``; its shape
-    operator at u is the symmetric part of ``dg/du``.
+    The field is ``n_p + g1 t1 + g2 t2`` with ``g_a = coef[a] . terms(u / h)``
+    (:func:`_terms_into`); its shape operator at u is the symmetric part of ``dg/du``.
 
     Returns
     -------
     bool
         False if the outputs are not finite (they are then left for the caller to clear).
     """
-    row = np.empty(N_TERMS)
-    d1t = np.empty(N_TERMS)
-    d2t = np.empty(N_TERMS)
+    # Scalars throughout: reads run this once per point.
     x1 = u1 / h
     x2 = u2 / h
-    _terms(x1, x2, row)
-    _d_terms(x1, x2, d1t, d2t)
-    g1 = 0.0
-    g2 = 0.0
-    j11 = 0.0
-    j12 = 0.0
-    j21 = 0.0
-    j22 = 0.0
-    for r in range(N_TERMS):
-        g1 += coef[0, r] * row[r]
-        g2 += coef[1, r] * row[r]
-        j11 += coef[0, r] * d1t[r]
-        j12 += coef[0, r] * d2t[r]
-        j21 += coef[1, r] * d1t[r]
-        j22 += coef[1, r] * d2t[r]
-    c1, c2, d1 = tangent_eigen(j11 / h, 0.5 * (j12 + j21) / h, j22 / h, t1, t2)
-    nn = n_p + g1 * t1 + g2 * t2
-    nn /= np.sqrt(np.sum(nn * nn))
-    d1 = d1 - np.sum(d1 * nn) * nn
-    d1 /= np.sqrt(np.sum(d1 * d1))
-    d2 = np.cross(nn, d1)
-    return store_outputs(j, c1, c2, nn, d1, d2, k1, k2, normals, dir1, dir2)
+    g1, j11, j12 = _component_at(coef, 0, x1, x2)
+    g2, j21, j22 = _component_at(coef, 1, x1, x2)
+    c1, c2, e1, e2 = eigen2(j11 / h, 0.5 * (j12 + j21) / h, j22 / h)
+    # The field's normal there, and k1's direction made tangent to it.
+    m0 = n_p[0] + g1 * t1[0] + g2 * t2[0]
+    m1 = n_p[1] + g1 * t1[1] + g2 * t2[1]
+    m2 = n_p[2] + g1 * t1[2] + g2 * t2[2]
+    mn = np.sqrt(m0 * m0 + m1 * m1 + m2 * m2)
+    m0, m1, m2 = m0 / mn, m1 / mn, m2 / mn
+    d0 = e1 * t1[0] + e2 * t2[0]
+    d1 = e1 * t1[1] + e2 * t2[1]
+    d2 = e1 * t1[2] + e2 * t2[2]
+    along = d0 * m0 + d1 * m1 + d2 * m2
+    d0, d1, d2 = d0 - along * m0, d1 - along * m1, d2 - along * m2
+    dn = np.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+    return store_xyz(j, c1, c2, m0, m1, m2, d0 / dn, d1 / dn, d2 / dn, k1, k2, normals, dir1,
+                     dir2)
+
+
+@njit(cache=True)
+def _component_at(coef, a, x1, x2):
+    """Tangent normal component ``a`` of a fitted field at scaled position ``(x1, x2)`` and its
+    derivatives along x1 and x2 (the monomials of :func:`_terms_into`)."""
+    c = coef[a]
+    x11, x12, x22 = x1 * x1, x1 * x2, x2 * x2
+    g = (c[0] + c[1] * x1 + c[2] * x2 + c[3] * x11 + c[4] * x12 + c[5] * x22
+         + c[6] * x11 * x1 + c[7] * x11 * x2 + c[8] * x1 * x22 + c[9] * x22 * x2)
+    d1 = (c[1] + c[3] * 2.0 * x1 + c[4] * x2 + c[6] * 3.0 * x11 + c[7] * 2.0 * x12
+          + c[8] * x22)
+    d2 = (c[2] + c[4] * x1 + c[5] * 2.0 * x2 + c[7] * x11 + c[8] * 2.0 * x12
+          + c[9] * 3.0 * x22)
+    return g, d1, d2
 
 
 @njit(parallel=True, cache=True)
@@ -440,16 +428,16 @@ def nfr_from_anchors(points, query, owner, anchors, coef, scale, frame, quad, qu
         dz = points[p, 2] - points[c, 2]
         if model[a] == MODEL_QUADRIC:
             hq = quad_scale[a]
-            st, c1, c2, nn, d1, d2 = curvature_from_quadric(
-                quad[a], hq, np.array([dx / hq, dy / hq, dz / hq]), FOOT_LIMIT)
+            st, c1, c2, n0, n1, n2, e0, e1, e2 = quadric_curvature_xyz(
+                quad[a], hq, dx / hq, dy / hq, dz / hq, FOOT_LIMIT)
             if st != OK or not supported(c1, c2, hq):
                 # Read the model at its anchor instead: scale selection admitted it there.
-                st, c1, c2, nn, d1, d2 = curvature_from_quadric(quad[a], hq, np.zeros(3),
-                                                                FOOT_LIMIT)
+                st, c1, c2, n0, n1, n2, e0, e1, e2 = quadric_curvature_xyz(
+                    quad[a], hq, 0.0, 0.0, 0.0, FOOT_LIMIT)
             if st != OK or not supported(c1, c2, hq):
                 status[j] = DEGENERATE if st == OK else st
                 continue
-            if not store_outputs(j, c1, c2, nn, d1, d2, k1, k2, normals, dir1, dir2):
+            if not store_xyz(j, c1, c2, n0, n1, n2, e0, e1, e2, k1, k2, normals, dir1, dir2):
                 clear_outputs(j, k1, k2, residual, normals, dir1, dir2)
                 status[j] = NON_FINITE
                 continue

@@ -21,8 +21,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from .linalg import cholesky, solve_lower, solve_upper_t
-from .quadric import DEGENERATE, NO_FOOT, OK, TOO_FEW, foot_point, shape_operator
+from .linalg import cholesky, dot, solve_lower, solve_upper_t, total
+from .quadric import DEGENERATE, NO_FOOT, OK, TOO_FEW, foot_point_xyz, shape_operator_xyz
 
 # a00, a11, a22, a01, a02, a12, b0, b1, b2 and the offset c.
 N_QUAD = 10
@@ -34,46 +34,12 @@ RIDGE = 1e-12
 
 
 # g(x) = 2ax + b is linear in the 9 unknowns theta; each of its 3 components involves 4 of
-# them: g_d = sum_j vals[d, j] * theta[ROW_COLS[d, j]], vals from _design_values(x).
+# them: g_d = sum_j vals[d, j] * theta[ROW_COLS[d, j]].
 ROW_COLS = np.array([[0, 3, 4, 6], [1, 3, 5, 7], [2, 4, 5, 8]], np.int64)
-
-
-@njit(cache=True)
-def _design_values(x0, x1, x2, vals):
-    """Nonzero entries (3, 4) of the rows of g(x), in the column order of ``ROW_COLS``."""
-    vals[0, 0] = 2.0 * x0
-    vals[0, 1] = 2.0 * x1
-    vals[0, 2] = 2.0 * x2
-    vals[1, 0] = 2.0 * x1
-    vals[1, 1] = 2.0 * x0
-    vals[1, 2] = 2.0 * x2
-    vals[2, 0] = 2.0 * x2
-    vals[2, 1] = 2.0 * x0
-    vals[2, 2] = 2.0 * x1
-    for d in range(3):
-        vals[d, 3] = 1.0
-
-
-@njit(cache=True)
-def quad_matrix(quad):
-    """Symmetric ``a`` (3, 3) and ``b`` (3,) of packed coefficients ``quad`` (N_QUAD,)."""
-    a = np.empty((3, 3))
-    a[0, 0] = quad[0]
-    a[1, 1] = quad[1]
-    a[2, 2] = quad[2]
-    a[0, 1] = a[1, 0] = quad[3]
-    a[0, 2] = a[2, 0] = quad[4]
-    a[1, 2] = a[2, 1] = quad[5]
-    return a, quad[6:9].copy()
-
-
-@njit(cache=True)
-def _gradient(quad, x0, x1, x2):
-    """g(x) = 2ax + b of packed coefficients, as three scalars (no allocation)."""
-    g0 = 2.0 * (quad[0] * x0 + quad[3] * x1 + quad[4] * x2) + quad[6]
-    g1 = 2.0 * (quad[3] * x0 + quad[1] * x1 + quad[5] * x2) + quad[7]
-    g2 = 2.0 * (quad[4] * x0 + quad[5] * x1 + quad[2] * x2) + quad[8]
-    return g0, g1, g2
+# The same entries as multiples of y = (x0, x1, x2, 1):
+# vals[d, j] = ROW_SCALE[j] * y[ROW_VARS[d, j]].
+ROW_VARS = np.array([[0, 1, 2, 3], [1, 0, 2, 3], [2, 0, 1, 3]], np.int64)
+ROW_SCALE = np.array([2.0, 2.0, 2.0, 1.0])
 
 
 @njit(cache=True)
@@ -112,9 +78,10 @@ def regress_normal_quadric(points, field, p, nbr, include_self, quad):
         return TOO_FEW, 0.0, np.nan, np.nan
     if not np.all(np.isfinite(n_p)):
         return DEGENERATE, 0.0, np.nan, np.nan
-    # Offsets from p and normals flipped to agree with p's, of the points with a known normal.
-    xs = np.empty((m, 3))
-    ns = np.empty((m, 3))
+    # Offsets from p and normals flipped to agree with p's, of the points with a known normal,
+    # one row per coordinate so the sums below run over contiguous memory.
+    xs = np.empty((3, m))
+    ns = np.empty((3, m))
     used = 0
     ss = 0.0
     for i in range(m):
@@ -124,42 +91,55 @@ def regress_normal_quadric(points, field, p, nbr, include_self, quad):
             continue
         s = 1.0 if nx * n_p[0] + ny * n_p[1] + nz * n_p[2] >= 0.0 else -1.0
         for d in range(3):
-            xs[used, d] = points[q, d] - points[p, d]
-            ss += xs[used, d] * xs[used, d]
-        ns[used, 0] = s * nx
-        ns[used, 1] = s * ny
-        ns[used, 2] = s * nz
+            xs[d, used] = points[q, d] - points[p, d]
+            ss += xs[d, used] * xs[d, used]
+        ns[0, used] = s * nx
+        ns[1, used] = s * ny
+        ns[2, used] = s * nz
         used += 1
     if used < MIN_POINTS_NQ:
         return TOO_FEW, 0.0, np.nan, np.nan
     h = np.sqrt(ss / used)
     if not h > 0.0:
         return DEGENERATE, 0.0, np.nan, np.nan
-    xs = xs[:used] / h
-    # |(I - nn') X theta|^2 = theta' (X'X - vv') theta with v = X'n, summed over the points;
-    # X'X is accumulated from the rows' 4 nonzeros (full matrix), vv' on the upper triangle.
-    xtx = np.zeros((N_UNKNOWNS, N_UNKNOWNS))
-    mat = np.zeros((N_UNKNOWNS, N_UNKNOWNS))
-    rhs = np.zeros(N_UNKNOWNS)
-    vals = np.empty((3, 4))
-    v = np.empty(N_UNKNOWNS)
+    for d in range(3):
+        for i in range(used):
+            xs[d, i] /= h
+    # |(I - nn') X theta|^2 = theta' (X'X - V'V) theta, rows of V being v_i = X_i'n_i. X'X
+    # needs only the moments of x up to second order; V'V and the right-hand side sum(v_i)
+    # are dot products and sums of V's columns (rows of `vs`).
+    vs = np.empty((N_UNKNOWNS, used))
     for i in range(used):
-        _design_values(xs[i, 0], xs[i, 1], xs[i, 2], vals)
-        v[:] = 0.0
-        for d in range(3):
-            for a in range(4):
-                ca = ROW_COLS[d, a]
-                v[ca] += ns[i, d] * vals[d, a]
-                for b in range(4):
-                    xtx[ca, ROW_COLS[d, b]] += vals[d, a] * vals[d, b]
-        for r in range(N_UNKNOWNS):
-            rhs[r] += v[r]
-            for c in range(r, N_UNKNOWNS):
-                mat[r, c] -= v[r] * v[c]
+        x0, x1, x2 = xs[0, i], xs[1, i], xs[2, i]
+        n0, n1, n2 = ns[0, i], ns[1, i], ns[2, i]
+        vs[0, i] = 2.0 * n0 * x0
+        vs[1, i] = 2.0 * n1 * x1
+        vs[2, i] = 2.0 * n2 * x2
+        vs[3, i] = 2.0 * (n0 * x1 + n1 * x0)
+        vs[4, i] = 2.0 * (n0 * x2 + n2 * x0)
+        vs[5, i] = 2.0 * (n1 * x2 + n2 * x1)
+        vs[6, i] = n0
+        vs[7, i] = n1
+        vs[8, i] = n2
+    # moments[a, b] = sum of y_a y_b over the points, y = (x0, x1, x2, 1).
+    moments = np.empty((4, 4))
+    for a in range(3):
+        moments[a, 3] = moments[3, a] = total(xs[a], used)
+        for b in range(a, 3):
+            moments[a, b] = moments[b, a] = dot(xs[a], xs[b], used)
+    moments[3, 3] = used
+    mat = np.zeros((N_UNKNOWNS, N_UNKNOWNS))
+    for d in range(3):
+        for a in range(4):
+            for b in range(4):
+                mat[ROW_COLS[d, a], ROW_COLS[d, b]] += (
+                    ROW_SCALE[a] * ROW_SCALE[b] * moments[ROW_VARS[d, a], ROW_VARS[d, b]])
+    rhs = np.empty(N_UNKNOWNS)
     trace = 0.0
     for r in range(N_UNKNOWNS):
+        rhs[r] = total(vs[r], used)
         for c in range(r, N_UNKNOWNS):
-            mat[r, c] += xtx[r, c]
+            mat[r, c] -= dot(vs[r], vs[c], used)
             mat[c, r] = mat[r, c]
         trace += mat[r, r]
     for r in range(N_UNKNOWNS):
@@ -175,26 +155,38 @@ def regress_normal_quadric(points, field, p, nbr, include_self, quad):
         return DEGENERATE, h, np.nan, np.nan
     for r in range(N_UNKNOWNS):
         quad[r] = z[r] * used / norm
-    # One pass for the offset and both residuals: with w = 1 / |g|^2, the offset is
-    # c = -sum(w f) / sum(w), and sum w (f + c)^2 = sum(w f^2) + c sum(w f).
-    sw = 0.0
-    swf = 0.0
-    swff = 0.0
-    sin2 = 0.0
+    # The offset and both residuals: with w = 1 / |g|^2, the offset is c = -sum(w f) / sum(w),
+    # and sum w (f + c)^2 = sum(w f^2) + c sum(w f). Coefficients as scalars and no exit in
+    # the loop, so it runs in SIMD lanes.
+    a00, a11, a22, a01, a02, a12 = quad[0], quad[1], quad[2], quad[3], quad[4], quad[5]
+    b0, b1, b2 = quad[6], quad[7], quad[8]
+    w = np.empty(used)
+    wf = np.empty(used)
+    f = np.empty(used)
+    sin2 = np.empty(used)
+    flat = 0
     for i in range(used):
-        g0, g1, g2 = _gradient(quad, xs[i, 0], xs[i, 1], xs[i, 2])
+        x0, x1, x2 = xs[0, i], xs[1, i], xs[2, i]
+        g0 = 2.0 * (a00 * x0 + a01 * x1 + a02 * x2) + b0
+        g1 = 2.0 * (a01 * x0 + a11 * x1 + a12 * x2) + b1
+        g2 = 2.0 * (a02 * x0 + a12 * x1 + a22 * x2) + b2
         gg = g0 * g0 + g1 * g1 + g2 * g2
-        if not gg > 0.0:
-            return DEGENERATE, h, np.nan, np.nan
-        f = _value(quad, xs[i, 0], xs[i, 1], xs[i, 2])
-        sw += 1.0 / gg
-        swf += f / gg
-        swff += f * f / gg
-        dot = ns[i, 0] * g0 + ns[i, 1] * g1 + ns[i, 2] * g2
-        sin2 += max(1.0 - dot * dot / gg, 0.0)
+        flat += 0 if gg > 0.0 else 1
+        w[i] = 1.0 / gg
+        f[i] = (a00 * x0 * x0 + a11 * x1 * x1 + a22 * x2 * x2
+                + 2.0 * (a01 * x0 * x1 + a02 * x0 * x2 + a12 * x1 * x2)
+                + b0 * x0 + b1 * x1 + b2 * x2)
+        wf[i] = w[i] * f[i]
+        along = ns[0, i] * g0 + ns[1, i] * g1 + ns[2, i] * g2
+        sin2[i] = max(1.0 - along * along * w[i], 0.0)
+    if flat > 0:
+        return DEGENERATE, h, np.nan, np.nan
+    sw = total(w, used)
+    swf = total(wf, used)
+    swff = dot(wf, f, used)
     quad[9] = -swf / sw
     dist2 = max(swff + quad[9] * swf, 0.0)
-    return OK, h, sin2 / used, h * np.sqrt(dist2 / used)
+    return OK, h, total(sin2, used) / used, h * np.sqrt(dist2 / used)
 
 
 @njit(cache=True)
@@ -230,18 +222,48 @@ def curvature_from_quadric(quad, h, d, max_dist):
         Unit normal (along the gradient, i.e. the fit centre's normal side) and principal
         directions.
     """
-    a, b = quad_matrix(quad)
-    # F(d + y) = y'ay + (2ad + b)'y + F(d): the foot point search starts at the origin.
-    b_here = 2.0 * (a @ d) + b
-    c_here = _value(quad, d[0], d[1], d[2]) + quad[9]
-    y, ok = foot_point(a, b_here, c_here, max_dist)
-    if not ok:
+    st, k1, k2, n0, n1, n2, e0, e1, e2 = quadric_curvature_xyz(quad, h, d[0], d[1], d[2],
+                                                               max_dist)
+    if st != OK:
         z = np.zeros(3)
         return NO_FOOT, np.nan, np.nan, z, z, z
-    g = 2.0 * (a @ y) + b_here
-    k1, k2, n, d1, d2 = shape_operator(g, 2.0 * a)
-    return OK, k1 / h, k2 / h, n, d1, d2
+    n = np.empty(3)
+    n[0], n[1], n[2] = n0, n1, n2
+    d1 = np.empty(3)
+    d1[0], d1[1], d1[2] = e0, e1, e2
+    return OK, k1, k2, n, d1, np.cross(n, d1)
 
 
-__all__ = ["MIN_POINTS_NQ", "N_QUAD", "curvature_from_quadric", "quad_matrix",
+@njit(cache=True)
+def quadric_curvature_xyz(quad, h, d0, d1, d2, max_dist):
+    """:func:`curvature_from_quadric` at the scaled position ``(d0, d1, d2)``, on scalars
+    (reads run it once per point; no allocation).
+
+    Returns
+    -------
+    status : int
+        OK or NO_FOOT.
+    k1, k2 : float
+        Principal curvatures (input units; NaN without a foot point).
+    n0, n1, n2, e0, e1, e2 : float
+        Unit normal and unit direction of k1 (d2 = n x d1).
+    """
+    a00, a11, a22, a01, a02, a12 = quad[0], quad[1], quad[2], quad[3], quad[4], quad[5]
+    # F(d + y) = y'ay + (2ad + b)'y + F(d): the foot point search starts at the origin.
+    b0 = 2.0 * (a00 * d0 + a01 * d1 + a02 * d2) + quad[6]
+    b1 = 2.0 * (a01 * d0 + a11 * d1 + a12 * d2) + quad[7]
+    b2 = 2.0 * (a02 * d0 + a12 * d1 + a22 * d2) + quad[8]
+    c = _value(quad, d0, d1, d2) + quad[9]
+    y0, y1, y2, ok = foot_point_xyz(a00, a11, a22, a01, a02, a12, b0, b1, b2, c, max_dist)
+    if not ok:
+        return NO_FOOT, np.nan, np.nan, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
+    g0 = 2.0 * (a00 * y0 + a01 * y1 + a02 * y2) + b0
+    g1 = 2.0 * (a01 * y0 + a11 * y1 + a12 * y2) + b1
+    g2 = 2.0 * (a02 * y0 + a12 * y1 + a22 * y2) + b2
+    k1, k2, n0, n1, n2, e0, e1, e2 = shape_operator_xyz(
+        g0, g1, g2, 2.0 * a00, 2.0 * a11, 2.0 * a22, 2.0 * a01, 2.0 * a02, 2.0 * a12)
+    return OK, k1 / h, k2 / h, n0, n1, n2, e0, e1, e2
+
+
+__all__ = ["MIN_POINTS_NQ", "N_QUAD", "curvature_from_quadric", "quadric_curvature_xyz",
            "regress_normal_quadric"]

@@ -40,7 +40,7 @@ from numba import njit, prange
 from .kernels import MAX_FOOT_DIST, fit_monge, gather_local, principal_axes, spans_surface
 from .normal_field import nfr_anchor_fits_one, supported
 from .normal_quadric import N_QUAD, curvature_from_quadric, regress_normal_quadric
-from .quadric import OK, foot_point, sampson_rms, shape_operator
+from .quadric import OK, foot_point, gradient_at, sampson_rms, shape_operator
 
 __all__ = ["DEFAULT_GAMMA", "KIND_MONGE", "KIND_NORMAL_QUADRIC", "RUNGS", "SIGMA_FLOOR", "TOPS",
            "ladder_estimates", "multiscale_anchor_fits", "pass_rungs", "scale_sigma"]
@@ -168,7 +168,7 @@ def _monge_rung(points, field, p, nbr, quad):
     x0, found = foot_point(a, b, c, MAX_FOOT_DIST)
     if not found:
         return 3, h, np.nan, np.nan, np.nan
-    g = 2.0 * (a @ x0) + b
+    g = gradient_at(a, b, x0)
     n_p = field[p]
     if g[0] * n_p[0] + g[1] * n_p[1] + g[2] * n_p[2] < 0.0:
         a, b, c, g = -a, -b, -c, -g

@@ -19,7 +19,16 @@ from numba import njit, prange
 
 from ..neighborhoods.kdtree import KNN_BLOCK, knn_point, knn_scratch
 from .kernels import MAX_FOOT_DIST, SOLVER_TAUBIN, fit_implicit, gather_local
-from .quadric import DEGENERATE, OK, clear_outputs, foot_point, shape_operator, store_outputs
+from .quadric import (
+    DEGENERATE,
+    OK,
+    clear_outputs,
+    foot_point,
+    gradient_at,
+    mat_vec3,
+    shape_operator,
+    store_outputs,
+)
 
 __all__ = ["adopt_neighbor_fits"]
 
@@ -55,15 +64,15 @@ def _read_fit(points, p, q, nbr, tol):
         return False, 0.0, 0.0, zero, zero, zero
     xp = (points[p] - points[q]) / scale
     # F moved to p: F(x + xp) = x'ax + (2 a xp + b)'x + F(xp).
-    bp = 2.0 * (a @ xp) + b
-    cp = np.sum(xp * (a @ xp)) + np.sum(b * xp) + c
+    bp = gradient_at(a, b, xp)
+    cp = np.sum(xp * mat_vec3(a, xp[0], xp[1], xp[2])) + np.sum(b * xp) + c
     x0, found = foot_point(a, bp, cp, MAX_FOOT_DIST)
     if not found or np.sqrt(np.sum(x0 * x0)) * scale > tol:
         return False, 0.0, 0.0, zero, zero, zero
-    g = 2.0 * (a @ x0) + bp
+    g = gradient_at(a, bp, x0)
     gg = 0.0
     for i in range(xs.shape[0]):
-        gi = 2.0 * (a @ xs[i]) + b
+        gi = gradient_at(a, b, xs[i])
         gg += np.sum(gi * gi)
     if np.sum(g * g) < REGULAR * REGULAR * gg / xs.shape[0]:
         return False, 0.0, 0.0, zero, zero, zero

@@ -62,7 +62,10 @@ def compute_block(spts, s_faces, req: Request, query=None, *, progress=None, pla
         Also return each query point's reach (see :class:`Block`).
     """
     n = spts.shape[0]
-    query = np.arange(n, dtype=np.int64) if query is None else np.asarray(query, np.int64)
+    # Every point, in order, unless told otherwise (the default estimator then holds no
+    # index array through its run).
+    whole = query is None or (len(query) == n and np.array_equal(query, np.arange(n)))
+    query = np.asarray(query, np.int64) if query is not None else None
     want_graph = req.mode == "auto"
     timings: dict = {}
     if req.method == "auto":
@@ -74,11 +77,14 @@ def compute_block(spts, s_faces, req: Request, query=None, *, progress=None, pla
         timings.update(run.timings)
         info = {"method": "auto", "params": req.auto_params,
                 "fit": "implicit" if run.plan.clean else "nfr", "plan": run.plan.to_dict()}
-        if query.shape[0] != n or np.any(query != np.arange(n)):
+        reach = run.reach
+        if not whole:
             res = select_rows(res, query, spts[query])
             graph = None if graph is None else graph[query]
-        reach = None if run.reach is None else run.reach[query]
+            reach = None if reach is None else reach[query]
         return Block(res, graph, reach, info, timings)
+    if query is None:
+        query = np.arange(n, dtype=np.int64)
     finder = make_finder(spts, req.method, faces=s_faces, **req.method_params)
     if mesh_graph is not None:
         finder.use_graph(mesh_graph)
