@@ -59,6 +59,7 @@ from ..fitting.normal_quadric import N_QUAD
 from ..fitting.outliers import ISOLATION_K, isolated, off_surface
 from ..fitting.scale_selection import multiscale_anchor_fits
 from ..fitting.shifted import adopt_neighbor_fits
+from ..memory import release_freed_memory
 from ..neighborhoods.kdtree import build_tree, knn_parallel
 from ..params import ParamSpec
 from ..status import Status
@@ -445,6 +446,7 @@ class AutoRun:
         self.plan = plan_auto(points, self.tree, params["noise_threshold"],
                               params["dense_noise"]) if plan is None else plan
         self.timings: dict[str, float] = {"plan": time.perf_counter() - t0}
+        release_freed_memory()
         self.track_reach = track_reach
         self.reach: np.ndarray | None = None
         self.outliers = np.zeros(points.shape[0], bool)
@@ -460,6 +462,7 @@ class AutoRun:
         self._done = 0
         t0 = time.perf_counter()
         field, radius = self._stage1(res, graph, k_stage1)
+        release_freed_memory()
         if self.plan.dense is not None:
             self.timings["stage1"] = time.perf_counter() - t0
             self._dense(res)
@@ -489,7 +492,10 @@ class AutoRun:
             if failed.size:  # rare: an implicit fit failed; its cell anchor's field takes over
                 self._fallback(res, field, radius[0], reps, owner, max(kc // 2, 12), failed)
             return
-        self._anchored(res, field, radius[0], reps, owner, kc)
+        # Handed over in a list so that nothing here keeps them once the fits are made.
+        stage1 = [field, radius[0]]
+        del field, radius
+        self._anchored(res, stage1, reps, owner, kc)
 
     def share_k(self) -> int:
         """``max_share`` of the cloud's points (at least 48)."""
@@ -628,18 +634,20 @@ class AutoRun:
         res.k2_std[:] = std
         res.mean_std[:] = std
 
-    def _anchored(self, res, field, r_normal, reps, owner, kc) -> None:
+    def _anchored(self, res, stage1: list, reps, owner, kc) -> None:
         """Two passes of anchored normal fits over ``kc`` neighbors of every anchor, read at
-        every point."""
-        fits, fit_reach, chosen, err = self._model(field, r_normal, reps, owner, kc)
-        # The reads below need only the fits: the tree (40 bytes a point) goes before the
-        # result pages they fill are touched.
+        every point. ``stage1`` holds the stage-1 normals and their radii (emptied here)."""
+        fits, fit_reach, chosen, err = self._model(*stage1, reps, owner, kc)
+        # The reads below need only the fits: the normals and their radii, and the tree (72
+        # bytes a point together), go before the result pages the reads fill are touched.
+        stage1.clear()
         self.tree = None
-        query = np.arange(self.points.shape[0], dtype=np.int64)
+        release_freed_memory()
         t0 = time.perf_counter()
-        for sl in self._chunks(query.shape[0]):
-            out = _OutputView(res, query[sl], 1.0 / self.plan.spacing)
-            nfr_from_anchors(self.points, query[sl], owner[sl], reps, *fits, *out.arrays)
+        for sl in self._chunks(self.points.shape[0]):
+            query = np.arange(sl.start, sl.stop, dtype=np.int64)
+            out = _OutputView(res, query, 1.0 / self.plan.spacing)
+            nfr_from_anchors(self.points, query, owner[sl], reps, *fits, *out.arrays)
             out.store(chosen[owner[sl]], err[owner[sl]])
             self._tick(sl.stop - sl.start)
         self.timings["pass2"] += time.perf_counter() - t0
@@ -679,6 +687,7 @@ class AutoRun:
         fits, fit_reach, chosen, err = inner._model(field, r_normal, reps, owner,
                                                     min(inner.fit_k(), ns - 1))
         self.tree = inner.tree = None  # as in _anchored: the reads need only the fits
+        release_freed_memory()
         for name, sec in inner.timings.items():
             self.timings[f"dense {name}"] = sec
         t0 = time.perf_counter()
@@ -723,6 +732,7 @@ class AutoRun:
                 field[self.outliers] = np.nan
                 if self.track_reach:
                     w = self._point_reach(reps, owner, fit_reach)
+            release_freed_memory()  # the pass's neighbor lists and scratch
             name = "pass2" if last else "pass1"
             self.timings[name] = self.timings.get(name, 0.0) + time.perf_counter() - t0
         return fits, fit_reach, chosen, err

@@ -22,6 +22,7 @@ from ..cloud import PointCloud
 from ..errors import ParameterError
 from ..estimators.fixed import DEFAULT_CHUNK
 from ..fitting import FITS
+from ..memory import release_freed_memory
 from ..orientation import (
     apply_signs,
     signs_auto,
@@ -161,10 +162,12 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
         else:
             res, graph, info, timings = run_tiled(spts, s_faces, req, tiles, progress,
                                                   executor)
+        release_freed_memory()  # what the block's run freed, before orientation's arrays
         t0 = time.perf_counter()
         orient(res, req.mode, s_normals, s_vp, graph)
         timings["orientation"] = time.perf_counter() - t0
     del graph
+    release_freed_memory()
     res = unpermute(res, inv, pts, tri)
     res.mean[:] = 0.5 * (res.k1 + res.k2)
     res.gaussian[:] = res.k1 * res.k2

@@ -23,7 +23,7 @@ ARCHITECTURE_DOC = PACKAGE.parent / "docs" / "architecture.md"
 #: Layer -> the modules and packages in it, relative to the package ("" is its ``__init__``).
 LAYERS = {
     "base": ("errors", "status", "params", "validation", "cloud", "result", "field_info",
-             "progress"),
+             "progress", "memory"),
     "kernels": ("neighborhoods", "fitting", "orientation", "uncertainty"),
     "estimators": ("estimators",),
     "pipeline": ("pipeline",),
