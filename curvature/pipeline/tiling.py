@@ -41,7 +41,12 @@ from .threads import numba_threads
 
 # Halo guesses in spacings (distance to the 24th neighbor); a wrong guess costs a recomputation,
 # never a wrong result.
-AUTO_HALO = 16.0
+# The default's reach is about twice its largest fit's radius (the second pass's fits read
+# normals the first pass fitted over as many neighbors) plus the anchor cells, and the largest
+# reach in a tile comes from its sparsest part: on a torus whose density varies 2.3-fold, tiles
+# of 1M points needed 37 spacings at k = 768. The guess is this many fit radii
+# (sqrt(k / 24) spacings): 45 spacings at k = 768. A halo of 16 spacings was computed twice.
+AUTO_HALO = 8.0
 HALO_MARGIN = 1.5
 GROWTH = 1.5
 # Tiles handed to an executor at once: keeps every worker busy while bounding the memory of
@@ -112,7 +117,7 @@ def halo_guess(req: Request, spacing: float) -> float:
 
     p = req.method_params
     if req.method == "auto":
-        return AUTO_HALO * spacing
+        return AUTO_HALO * size(req.auto_params.get("k", 768))
     if req.method == "knn":
         reach = size(p.get("k", 24))
     elif req.method == "tc":

@@ -65,6 +65,20 @@ def test_short_halos_grow_and_results_stay_identical(torus, monkeypatch):
         assert_identical(whole, tiled)
 
 
+def test_the_default_halo_covers_its_reach_without_recomputing(torus):
+    # The guess is in fit radii: twice the fit, sqrt(2) times the halo.
+    def guess(k):
+        req = resolve_request(None, None, None, {"k": k}, None, None, None, 1, 1000)
+        return tiling.halo_guess(req, 0.01)
+
+    assert guess(768) == pytest.approx(np.sqrt(2.0) * guess(384))
+    assert guess(768) == pytest.approx(tiling.AUTO_HALO * np.sqrt(768 / 24) * 0.01)
+    # A halo of 16 spacings was computed twice on every tile of a noisy torus (issue 21).
+    assert guess(768) > 2 * 16 * 0.01
+    res = curvature.estimate(torus, tile_points=2000)
+    assert res.info["tiles"] > 2 and res.info["regrown"] == 0
+
+
 def test_tiles_are_identical_for_any_workers_and_order(torus):
     ref = curvature.estimate(torus, tile_points=3000, workers=1)
     perm = np.random.default_rng(3).permutation(len(torus))
