@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..estimators.auto import plan_auto
+from ..estimators.auto import PLAN_CELLS, coarse_cell, grid_cells, knn_csr, plan_auto
 from ..neighborhoods import make_finder
 from ..neighborhoods.kdtree import build_tree
 from ..orientation import ORIENT_K
@@ -41,12 +41,13 @@ from .threads import numba_threads
 
 # Halo guesses in spacings (distance to the 24th neighbor); a wrong guess costs a recomputation,
 # never a wrong result.
-# The default's reach is about twice its largest fit's radius (the second pass's fits read
-# normals the first pass fitted over as many neighbors) plus the anchor cells, and the largest
-# reach in a tile comes from its sparsest part: on a torus whose density varies 2.3-fold, tiles
-# of 1M points needed 37 spacings at k = 768. The guess is this many fit radii
-# (sqrt(k / 24) spacings): 45 spacings at k = 768. A halo of 16 spacings was computed twice.
-AUTO_HALO = 8.0
+# The default's first halo, in radii of its largest fit (the median distance to the k-th
+# neighbor, measured on the plan's sample): its second pass reads normals the first pass
+# fitted over as many neighbors, and a tile's largest reach is far above the median (1M-point
+# tiles of a torus with 0.1 % noise needed 10.3 radii at 3M points, 11.4 at 10M). A halo of
+# 16 spacings made every tile run twice; one in spacings (the 24th neighbor) is too wide on
+# dense noisy clouds, whose spacing the noise inflates (1.9 times at 10M points).
+AUTO_HALO = 13.0
 HALO_MARGIN = 1.5
 GROWTH = 1.5
 # Tiles handed to an executor at once: keeps every worker busy while bounding the memory of
@@ -110,14 +111,17 @@ class TileOutput:
     seconds: float
 
 
-def halo_guess(req: Request, spacing: float) -> float:
-    """A first halo width for ``req`` on a cloud of the given spacing."""
+def halo_guess(req: Request, spacing: float, fit_radius: float = math.nan) -> float:
+    """A first halo width for ``req`` on a cloud of the given spacing; for the default,
+    ``fit_radius`` is the median distance to the ``k``-th neighbor (:func:`fit_radius`)."""
     def size(k):
         return math.sqrt(max(k, 1) / 24.0) * spacing
 
     p = req.method_params
     if req.method == "auto":
-        return AUTO_HALO * size(req.auto_params.get("k", 768))
+        if not fit_radius > 0.0:  # not measured: the fit's radius on a flat, even cloud
+            fit_radius = size(req.auto_params.get("k", 768))
+        return AUTO_HALO * fit_radius
     if req.method == "knn":
         reach = size(p.get("k", 24))
     elif req.method == "tc":
@@ -129,6 +133,14 @@ def halo_guess(req: Request, spacing: float) -> float:
     if req.fit == "nfr":
         reach += size(req.fit_opts.get("normal_k", 48))
     return HALO_MARGIN * reach
+
+
+def fit_radius(spts: np.ndarray, tree: tuple, k: int) -> float:
+    """Median distance to the ``k``-th neighbor over the plan's geometric sample."""
+    sample, _ = grid_cells(spts, spts.min(axis=0), coarse_cell(spts, PLAN_CELLS))
+    k = min(k, spts.shape[0] - 1)
+    _, _, d2 = knn_csr(spts, tree, sample, k)
+    return float(np.median(np.sqrt(d2[:, -1])))
 
 
 def make_tiles(spts: np.ndarray, tile_points: int, halo: float) -> list[Tile]:
@@ -287,10 +299,12 @@ class TiledRun:
             finder = make_finder(self.spts, "mesh", faces=self.s_faces, **self.req.method_params)
             finder._nbtree = tree
             self.mesh_graph = finder.graph(self.req.workers)
+        radius = (fit_radius(self.spts, tree, self.req.auto_params.get("k", 768))
+                  if self.req.method == "auto" else math.nan)
         del tree
         self.extent = float(np.linalg.norm(self.spts.max(axis=0) - self.spts.min(axis=0)))
         self.tiles = make_tiles(self.spts, self.tile_points,
-                                halo_guess(self.req, self.plan.spacing))
+                                halo_guess(self.req, self.plan.spacing, radius))
         self.result = empty_result(self.spts, self.s_faces)
         self.graph = np.empty((n, ORIENT_K), np.int32) if self.req.mode == "auto" else None
         self.info: dict = {}

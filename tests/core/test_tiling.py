@@ -7,6 +7,7 @@ import pytest
 
 import curvature
 from curvature import synthetic
+from curvature.neighborhoods.kdtree import build_tree
 from curvature.pipeline import tiling
 from curvature.pipeline.block import compute_block
 from curvature.pipeline.request import resolve_request
@@ -66,15 +67,19 @@ def test_short_halos_grow_and_results_stay_identical(torus, monkeypatch):
 
 
 def test_the_default_halo_covers_its_reach_without_recomputing(torus):
-    # The guess is in fit radii: twice the fit, sqrt(2) times the halo.
-    def guess(k):
+    # The guess is in fit radii: measured, or from the spacing on an even cloud.
+    def guess(k, radius=np.nan):
         req = resolve_request(None, None, None, {"k": k}, None, None, None, 1, 1000)
-        return tiling.halo_guess(req, 0.01)
+        return tiling.halo_guess(req, 0.01, radius)
 
+    assert guess(768, 0.05) == pytest.approx(tiling.AUTO_HALO * 0.05)
     assert guess(768) == pytest.approx(np.sqrt(2.0) * guess(384))
     assert guess(768) == pytest.approx(tiling.AUTO_HALO * np.sqrt(768 / 24) * 0.01)
+    spts = np.ascontiguousarray(torus)
+    radius = tiling.fit_radius(spts, build_tree(spts), 96)
+    d = np.sort(np.linalg.norm(spts[:, None] - spts[None, ::97], axis=2), axis=0)[96]
+    assert np.min(d) <= radius <= np.max(d)  # a distance to the 96th neighbor
     # A halo of 16 spacings was computed twice on every tile of a noisy torus (issue 21).
-    assert guess(768) > 2 * 16 * 0.01
     res = curvature.estimate(torus, tile_points=2000)
     assert res.info["tiles"] > 2 and res.info["regrown"] == 0
 
