@@ -41,13 +41,14 @@ from .threads import numba_threads
 
 # Halo guesses in spacings (distance to the 24th neighbor); a wrong guess costs a recomputation,
 # never a wrong result.
-# The default's first halo, in radii of its largest fit (the median distance to the k-th
-# neighbor, measured on the plan's sample): its second pass reads normals the first pass
-# fitted over as many neighbors, and a tile's largest reach is far above the median (1M-point
-# tiles of a torus with 0.1 % noise needed 10.3 radii at 3M points, 11.4 at 10M). A halo of
-# 16 spacings made every tile run twice; one in spacings (the 24th neighbor) is too wide on
-# dense noisy clouds, whose spacing the noise inflates (1.9 times at 10M points).
-AUTO_HALO = 13.0
+# The default's first halo, in radii of its largest fit: the median distance to the k-th
+# neighbor on the plan's sample, over sqrt(dense_share) where the fits see a thinned share
+# (k thinned points cover k / share). Its second pass reads normals the first pass fitted over
+# as many neighbors: the largest reach measured was 4.2 radii (1M-point torus, 0.1 % noise),
+# 4.3 and 4.5 (3M and 10M points, thinned to 0.18 and 0.16). A halo of 16 spacings made every
+# tile of those run twice; one in spacings (the 24th neighbor) is too wide on dense noisy
+# clouds, whose spacing the noise inflates (1.9 times at 10M points).
+AUTO_HALO = 5.5
 HALO_MARGIN = 1.5
 GROWTH = 1.5
 # Tiles handed to an executor at once: keeps every worker busy while bounding the memory of
@@ -299,8 +300,10 @@ class TiledRun:
             finder = make_finder(self.spts, "mesh", faces=self.s_faces, **self.req.method_params)
             finder._nbtree = tree
             self.mesh_graph = finder.graph(self.req.workers)
-        radius = (fit_radius(self.spts, tree, self.req.auto_params.get("k", 768))
-                  if self.req.method == "auto" else math.nan)
+        radius = math.nan
+        if self.req.method == "auto":
+            radius = (fit_radius(self.spts, tree, self.req.auto_params.get("k", 768))
+                      / math.sqrt(self.plan.dense_share))
         del tree
         self.extent = float(np.linalg.norm(self.spts.max(axis=0) - self.spts.min(axis=0)))
         self.tiles = make_tiles(self.spts, self.tile_points,
