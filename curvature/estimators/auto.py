@@ -820,7 +820,6 @@ class AutoRun:
         """First-pass normals at every point, computed in chunks and written into ``field``
         (which keeps its normal where the read failed); the reads use only the fits, so
         refining in place changes nothing and holds one field instead of two."""
-        refined = field
         n = self.points.shape[0]
         for sl in self._chunks(n):
             query = np.arange(sl.start, sl.stop, dtype=np.int64)
@@ -829,8 +828,8 @@ class AutoRun:
                     np.empty((m, 3)), np.empty(m), np.empty(m, np.int8)]
             nfr_from_anchors(self.points, query, owner[sl], anchors, *fits, *outs)
             ok = outs[6] == Status.OK
-            refined[query[ok]] = outs[2][ok]
-        return refined
+            field[query[ok]] = outs[2][ok]
+        return field
 
 
 def _prefix_csr(nbr: np.ndarray, k: int):

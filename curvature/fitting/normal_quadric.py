@@ -22,7 +22,15 @@ import numpy as np
 from numba import njit
 
 from .linalg import cholesky, dot, solve_lower, solve_upper_t, total
-from .quadric import DEGENERATE, NO_FOOT, OK, TOO_FEW, foot_point_xyz, shape_operator_xyz
+from .quadric import (
+    DEGENERATE,
+    NO_FOOT,
+    OK,
+    TOO_FEW,
+    foot_point_xyz,
+    shape_operator_xyz,
+    sym_gradient,
+)
 
 # a00, a11, a22, a01, a02, a12, b0, b1, b2 and the offset c.
 N_QUAD = 10
@@ -167,9 +175,7 @@ def regress_normal_quadric(points, field, p, nbr, include_self, quad):
     flat = 0
     for i in range(used):
         x0, x1, x2 = xs[0, i], xs[1, i], xs[2, i]
-        g0 = 2.0 * (a00 * x0 + a01 * x1 + a02 * x2) + b0
-        g1 = 2.0 * (a01 * x0 + a11 * x1 + a12 * x2) + b1
-        g2 = 2.0 * (a02 * x0 + a12 * x1 + a22 * x2) + b2
+        g0, g1, g2 = sym_gradient(a00, a11, a22, a01, a02, a12, b0, b1, b2, x0, x1, x2)
         gg = g0 * g0 + g1 * g1 + g2 * g2
         flat += 0 if gg > 0.0 else 1
         w[i] = 1.0 / gg
@@ -250,16 +256,13 @@ def quadric_curvature_xyz(quad, h, d0, d1, d2, max_dist):
     """
     a00, a11, a22, a01, a02, a12 = quad[0], quad[1], quad[2], quad[3], quad[4], quad[5]
     # F(d + y) = y'ay + (2ad + b)'y + F(d): the foot point search starts at the origin.
-    b0 = 2.0 * (a00 * d0 + a01 * d1 + a02 * d2) + quad[6]
-    b1 = 2.0 * (a01 * d0 + a11 * d1 + a12 * d2) + quad[7]
-    b2 = 2.0 * (a02 * d0 + a12 * d1 + a22 * d2) + quad[8]
+    b0, b1, b2 = sym_gradient(a00, a11, a22, a01, a02, a12, quad[6], quad[7], quad[8],
+                              d0, d1, d2)
     c = _value(quad, d0, d1, d2) + quad[9]
     y0, y1, y2, ok = foot_point_xyz(a00, a11, a22, a01, a02, a12, b0, b1, b2, c, max_dist)
     if not ok:
         return NO_FOOT, np.nan, np.nan, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0
-    g0 = 2.0 * (a00 * y0 + a01 * y1 + a02 * y2) + b0
-    g1 = 2.0 * (a01 * y0 + a11 * y1 + a12 * y2) + b1
-    g2 = 2.0 * (a02 * y0 + a12 * y1 + a22 * y2) + b2
+    g0, g1, g2 = sym_gradient(a00, a11, a22, a01, a02, a12, b0, b1, b2, y0, y1, y2)
     k1, k2, n0, n1, n2, e0, e1, e2 = shape_operator_xyz(
         g0, g1, g2, 2.0 * a00, 2.0 * a11, 2.0 * a22, 2.0 * a01, 2.0 * a02, 2.0 * a12)
     return OK, k1 / h, k2 / h, n0, n1, n2, e0, e1, e2

@@ -27,6 +27,15 @@ def mat_vec3(a, x0, x1, x2):
     return out
 
 
+@njit(cache=True, inline="always")
+def sym_gradient(a00, a11, a22, a01, a02, a12, b0, b1, b2, x0, x1, x2):
+    """grad F(x) = 2 a x + b with the symmetric ``a`` and ``b`` given by their entries, as
+    three scalars (inlined, so loops calling it stay in SIMD lanes)."""
+    return (2.0 * (a00 * x0 + a01 * x1 + a02 * x2) + b0,
+            2.0 * (a01 * x0 + a11 * x1 + a12 * x2) + b1,
+            2.0 * (a02 * x0 + a12 * x1 + a22 * x2) + b2)
+
+
 @njit(cache=True)
 def gradient_at(a, b, x):
     """grad F(x) = 2 a x + b of F = x'ax + b'x + c, without BLAS (:func:`mat_vec3`)."""
@@ -84,6 +93,7 @@ def foot_point_xyz(a00, a11, a22, a01, a02, a12, b0, b1, b2, c, max_dist):
         ax0 = a00 * x0 + a01 * x1 + a02 * x2
         ax1 = a01 * x0 + a11 * x1 + a12 * x2
         ax2 = a02 * x0 + a12 * x1 + a22 * x2
+        # a x is needed for F as well, so the gradient is not sym_gradient's
         f = (x0 * ax0 + x1 * ax1 + x2 * ax2) + (b0 * x0 + b1 * x1 + b2 * x2) + c
         g0, g1, g2 = 2.0 * ax0 + b0, 2.0 * ax1 + b1, 2.0 * ax2 + b2
         gg = g0 * g0 + g1 * g1 + g2 * g2
