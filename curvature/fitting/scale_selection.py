@@ -11,23 +11,23 @@ rule of Lepski (Lepski, Mammen & Spokoiny, Ann. Statist. 25 (1997)), the pairwis
 intersection of confidence intervals rule (Goldenshluger & Nemirovski, Math. Methods Statist. 6
 (1997)):
 
-* the small rungs are positional Monge fits (a quadratic height function over the anchor's
-  PCA plane, corrected to be exact on spheres and cylinders: ``circular`` in
-  :func:`~curvature.fitting.kernels.fit_monge`): the stage-1 normals are PCA normals over 48 neighbors, smoothed across any
-  feature narrower than that, so a fit to them cannot be sharper than they are (on a fillet of
-  6.5 spacings the normal fits read 3.4 for 5 at any size, Monge over 24 points 5.15); the
-  larger rungs fit the normal-constrained quadric, which averages noise better;
+* the small rungs are positional Monge fits (a quadratic height function over the anchor's PCA
+  plane, corrected to be exact on spheres and cylinders: ``circular`` in
+  :func:`~curvature.fitting.kernels.fit_monge`): the stage-1 normals are PCA normals over 48
+  neighbors, smoothed across any feature narrower than that, so a fit to them cannot be sharper than
+  they are (on a fillet of 6.5 spacings the normal fits read 3.4 for 5 at any size, Monge over 24
+  points 5.15); the larger rungs fit the normal-constrained quadric, which averages noise better;
 * every scale s gives principal curvatures k1_s, k2_s at the anchor and a standard error
   ``sigma_s = calib_s * d_s / (h_s**2 * sqrt(s))``, with d_s the fit's RMS distance of its
   points to the fitted surface (noise plus whatever the model cannot follow) and h_s their RMS
   distance from the anchor: the error of a curvature read off a least-squares surface over s
   points spread over radius h with residual d. ``calib_s`` (in :data:`RUNGS` and
   :data:`TOPS`) makes sigma_s the measured error on noisy planes and spheres (docs/accuracy.md);
-* the largest fit is kept whose k1 and k2 agree with those of every smaller fit within
-  ``gamma (sigma_s + sigma_r)`` (Lepski's rule: its bias is not visible above the noise of
-  any smaller fit; the 24-point fit only checks the 48-point one), and whose sigma is at most :data:`SIGMA_GROWTH` times the smallest below
-  it: a fit that reached across a thin wall or over an edge has a large residual distance,
-  and so a large sigma, even while its wide interval still overlaps the others.
+* the largest fit is kept whose k1 and k2 agree with those of every smaller fit within ``gamma
+  (sigma_s + sigma_r)`` (Lepski's rule: its bias is not visible above the noise of any smaller fit;
+  the 24-point fit only checks the 48-point one), and whose sigma is at most :data:`SIGMA_GROWTH`
+  times the smallest below it: a fit that reached across a thin wall or over an edge has a large
+  residual distance, and so a large sigma, even while its wide interval still overlaps the others.
 
 The kept model is written in the same arrays as ``nfr_anchor_fits`` so that
 :func:`~curvature.fitting.normal_field.nfr_from_anchors` reads it unchanged.
@@ -239,14 +239,14 @@ def _lepski(est, sg, gamma, growth, first_top):
     :data:`TOP_AGREEMENT` times their combined sigma: the two fit the same model to nested
     patches, so their noise is shared and a small difference already shows a bias.
 
-    Each candidate is compared with every smaller rung directly, not with a running
-    intersection, so one chance disagreement between two noisy small fits does not stop the
-    selection at the smallest of them; and the smallest rung (24 points, the noisiest) can
-    only turn down the next: alone it stopped every wider fit where it was off by chance
-    (a 10,000-point plane at 0.1 % noise, p99.9 of |k| 1.9 with it, 1.3 without, max 9.6
-    and 2.8), while at fillets and corners the 48-point rung sees the same biases. The growth test turns down a large fit whose residual
-    jumped (it reached across a thin wall or over an edge) even while its wide interval still
-    overlaps the others.
+    Each candidate is compared with every smaller rung directly, not with a running intersection, so
+    one chance disagreement between two noisy small fits does not stop the selection at the smallest
+    of them; and the smallest rung (24 points, the noisiest) can only turn down the next: alone it
+    stopped every wider fit where it was off by chance (a 10,000-point plane at 0.1 % noise, p99.9
+    of |k| 1.9 with it, 1.3 without, max 9.6 and 2.8), while at fillets and corners the 48-point
+    rung sees the same biases. The growth test turns down a large fit whose residual jumped (it
+    reached across a thin wall or over an edge) even while its wide interval still overlaps the
+    others.
     """
     count = est.shape[0]
     for c in range(count - 1, -1, -1):
