@@ -18,7 +18,14 @@ from curvature import synthetic
 from curvature.estimators.auto import knn_csr
 from curvature.fitting.normal_field import nfr_anchor_fits_one, pca_normals
 from curvature.fitting.normal_quadric import N_QUAD
-from curvature.fitting.scale_selection import RUNGS, TOP_POINTS, TOPS, ladder_estimates
+from curvature.fitting.scale_selection import (
+    KIND_MONGE_RIDGE,
+    KIND_NORMAL_QUADRIC,
+    RUNGS,
+    TOP_POINTS,
+    TOPS,
+    ladder_estimates,
+)
 from curvature.neighborhoods.kdtree import build_tree
 
 
@@ -44,7 +51,7 @@ def rung_errors(cloud, anchors: int, normal_k: int = 48, seed: int = 0):
     one = [np.empty(1), np.empty(1), np.empty(1, np.int8), np.empty(1), np.empty(1, np.int8)]
     for j, p in enumerate(idx):
         nbr = indices[indptr[j]:indptr[j + 1]]
-        quads, est = np.empty((levels, N_QUAD)), np.empty((rows, 5))
+        quads, est = np.empty((levels, N_QUAD)), np.empty((rows, 6))
         ladder_estimates(pts, field, p, nbr, ladder, kinds, quads, est)
         counts = list(ladder)
         for t, size in enumerate(tops):
@@ -52,7 +59,7 @@ def rung_errors(cloud, anchors: int, normal_k: int = 48, seed: int = 0):
             sub = nbr[:size:stride]
             fk1, fk2, fd, fh = nfr_anchor_fits_one(pts, field, p, sub, 0.7, coef, quad, frame,
                                                    0, one[0], one[1], one[2], one[3], one[4])
-            est[levels + t] = (1.0 if one[4][0] == 0 else 0.0, fk1, fk2, fd, fh)
+            est[levels + t] = (1.0 if one[4][0] == 0 else 0.0, fk1, fk2, fd, fh, fh)
             counts.append(sub.shape[0])
         sign = 1.0 if np.dot(field[p], cloud.normals[p]) >= 0 else -1.0
         t1, t2 = (cloud.k1[p], cloud.k2[p]) if sign > 0 else (-cloud.k2[p], -cloud.k1[p])
@@ -60,7 +67,7 @@ def rung_errors(cloud, anchors: int, normal_k: int = 48, seed: int = 0):
             if est[li, 0] != 1.0:
                 continue
             err[li].append(np.hypot(est[li, 1] - t1, est[li, 2] - t2) / np.sqrt(2.0))
-            pred[li].append(est[li, 3] / (est[li, 4] ** 2 * np.sqrt(counts[li])))
+            pred[li].append(est[li, 3] / (est[li, 5] ** 2 * np.sqrt(counts[li])))
     return [(float(np.sqrt(np.mean(np.square(e)))), float(np.sqrt(np.mean(np.square(q)))))
             for e, q in zip(err, pred, strict=True)]
 
@@ -70,7 +77,8 @@ def main() -> None:
     parser.add_argument("--n", type=int, default=20000)
     parser.add_argument("--anchors", type=int, default=1500)
     args = parser.parse_args()
-    names = [f"{s}/{'monge' if k == 0 else 'nquad'}" for s, k, _ in RUNGS["fit"]]
+    kind_names = {KIND_NORMAL_QUADRIC: "nquad", KIND_MONGE_RIDGE: "ridge"}
+    names = [f"{s}/{kind_names.get(k, 'monge')}" for s, k, _ in RUNGS["fit"]]
     names += [f"top/{s}" for s, _ in TOPS["fit"]]
     print("shape      noise  " + "  ".join(f"{n:>14}" for n in names))
     for shape in ("plane", "sphere", "cylinder"):

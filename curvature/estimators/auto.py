@@ -748,7 +748,7 @@ class AutoRun:
         Returns
         -------
         own : ndarray, shape (m,), int64
-            The points refitted (outliers never are).
+            The points refitted (outliers never are, nor points whose own fits all failed).
         reach : ndarray, shape (m,) or None
             With ``track_reach``, the reach of their fits.
         """
@@ -758,18 +758,24 @@ class AutoRun:
         k = min(REFIT_SIZE, kc)
         self._total += own.shape[0]
         # In chunks: the fits of a chunk are read and dropped before the next is made.
+        done = np.ones(own.shape[0], bool)
         for sl in self._chunks(own.shape[0]):
             query = own[sl]
             fits, fit_reach, size, err = self._fit_anchors(query, field, k, field_reach)
             out = _OutputView(res, query, 1.0 / self.plan.spacing)
             nfr_from_anchors(self.points, query, np.arange(query.shape[0], dtype=np.int64),
                              query, *fits, *out.arrays)
-            out.store(size, err)
+            # A point whose own fits all failed (a rim of 2 spacings' radius) reads its
+            # anchor's model instead, like the points outside the zone.
+            ok = out.arrays[6] == Status.OK
+            done[sl] = ok
+            out.keep(ok)
+            out.store(size[ok], err[ok])
             if reach is not None:
                 reach[sl] = fit_reach
             self._tick(sl.stop - sl.start)
         self.timings["refit"] = time.perf_counter() - t0
-        return own, reach
+        return own[done], (reach[done] if reach is not None else None)
 
     def _dense(self, res) -> None:
         """Fits on a thinned share of a dense noisy cloud (``plan.dense``), read at every point.
@@ -974,6 +980,12 @@ class _OutputView:
         self.rows = rows
         self.arrays = (np.empty(m), np.empty(m), np.empty((m, 3)), np.empty((m, 3)),
                        np.empty((m, 3)), np.empty(m), np.empty(m, np.int8))
+
+    def keep(self, mask: np.ndarray) -> None:
+        """Drop the rows where ``mask`` (m,) is False: :meth:`store` leaves them untouched."""
+        if not mask.all():
+            self.rows = self.rows[mask]
+            self.arrays = tuple(a[mask] for a in self.arrays)
 
     def store(self, neighbor_count, std=None) -> None:
         """Copy the rows into the result; ``std`` (m,) is the standard error of their k1 and

@@ -23,11 +23,17 @@ intersection of confidence intervals rule (Goldenshluger & Nemirovski, Math. Met
   distance from the anchor: the error of a curvature read off a least-squares surface over s
   points spread over radius h with residual d. ``calib_s`` (in :data:`RUNGS` and
   :data:`TOPS`) makes sigma_s the measured error on noisy planes and spheres (docs/accuracy.md);
+* where the circular 48-point rung finds one principal curvature well below the other (a
+  fillet, a leading edge), a ridge rung fits 96 points of a patch stretched along the smaller
+  curvature's direction: as narrow across the ridge as the 48-point rung, with twice its points;
 * the largest fit is kept whose k1 and k2 agree with those of every smaller fit within ``gamma
   (sigma_s + sigma_r)`` (Lepski's rule: its bias is not visible above the noise of any smaller fit;
   the 24-point fit only checks the 48-point one), and whose sigma is at most :data:`SIGMA_GROWTH`
   times the smallest below it: a fit that reached across a thin wall or over an edge has a large
-  residual distance, and so a large sigma, even while its wide interval still overlaps the others.
+  residual distance, and so a large sigma, even while its wide interval still overlaps the others;
+* a smaller Monge rung that the kept fit disagrees with by clearly more than their errors, and
+  whose expected error is below the kept fit's as that disagreement shows it, replaces it
+  (:func:`_least_error`).
 
 The kept model is written in the same arrays as ``nfr_anchor_fits`` so that
 :func:`~curvature.fitting.normal_field.nfr_from_anchors` reads it unchanged.
@@ -43,8 +49,9 @@ from .normal_field import nfr_anchor_fits_one, supported
 from .normal_quadric import N_QUAD, curvature_from_quadric, regress_normal_quadric
 from .quadric import OK, foot_point, gradient_at, sampson_rms, shape_operator
 
-__all__ = ["DEFAULT_GAMMA", "KIND_MONGE", "KIND_NORMAL_QUADRIC", "RUNGS", "SIGMA_FLOOR", "TOPS",
-           "ladder_estimates", "multiscale_anchor_fits", "pass_rungs", "scale_sigma"]
+__all__ = ["DEFAULT_GAMMA", "KIND_MONGE", "KIND_MONGE_RIDGE", "KIND_NORMAL_QUADRIC", "RUNGS",
+           "SIGMA_FLOOR", "TOPS", "ladder_estimates", "multiscale_anchor_fits", "pass_rungs",
+           "scale_sigma"]
 
 #: Rung models: a positional Monge quadric, the normal-constrained quadric, or a Monge
 #: quadric with CIRCULAR_ROUNDS of the circular correction (kernels.fit_monge). On a filleted
@@ -55,6 +62,28 @@ KIND_MONGE = 0
 KIND_NORMAL_QUADRIC = 1
 KIND_MONGE_CIRCULAR = 2
 CIRCULAR_ROUNDS = 3
+#: A circular Monge quadric over a patch stretched along a ridge: the points of the nearest
+#: RIDGE_POOL nearest to the anchor when distances along the smaller principal curvature's
+#: direction (of the last circular rung) count 1 / RIDGE_ASPECT. Across a fillet or a
+#: leading edge it is as narrow as the isotropic rung of half its points, so no more biased
+#: where the curvature ends at the ridge's sides, with twice the points: on a blade's leading
+#: edge (k = 20, radius 3.7 spacings, 0.1 % noise) 96 points of 384 read 0.77 (mean of the
+#: larger of the k1 and k2 errors) where the isotropic 48-point rung reads 1.15 and the
+#: 96-point one 2.4; longer patches (144 points, aspect 3) gain little (0.73).
+KIND_MONGE_RIDGE = 3
+RIDGE_ASPECT = 2.0
+#: A ridge rung is fitted only where the last circular rung's smaller curvature is at most
+#: this share of the larger: on a corner sphere its direction is arbitrary and a stretched
+#: patch reaches into the fillets (a filleted box's corners: 0.45 -> 0.89 without the test).
+RIDGE_RATIO = 0.5
+RIDGE_POOL = 384
+#: A Monge rung whose residual exceeds this share of its patch's RMS radius (across the ridge
+#: for a ridge rung) is not used. Noise that large against the patch biases a height fit
+#: instead of only scattering it: on a 1M-point torus at 0.1 % noise (residual 0.26 of the
+#: 48-point patch's radius) the 48-point and ridge rungs read about 25 for a true 1 with
+#: standard errors near 6, and turned the wider fits down. Elsewhere the ratio is about 0.05
+#: (10,000-point clouds at 0.5 %, parts at 0.1 %).
+MONGE_NOISE_LIMIT = 0.12
 #: The rungs of each pass, ``(neighbors, model, calibration)``: prefix fits tried below the
 #: tops. The calibration is the standard error per unit of d / (h^2 sqrt(s)): RMS curvature
 #: error over that RMS measured on noisy planes, spheres and cylinders (0.1 to 0.5 % noise,
@@ -65,7 +94,8 @@ CIRCULAR_ROUNDS = 3
 RUNGS = {
     "refine": ((96, KIND_NORMAL_QUADRIC, 1.9), (192, KIND_NORMAL_QUADRIC, 2.6)),
     "fit": ((24, KIND_MONGE_CIRCULAR, 6.7), (48, KIND_MONGE_CIRCULAR, 5.5),
-            (96, KIND_NORMAL_QUADRIC, 1.9), (192, KIND_NORMAL_QUADRIC, 2.6)),
+            (96, KIND_MONGE_RIDGE, 4.1), (96, KIND_NORMAL_QUADRIC, 1.9),
+            (192, KIND_NORMAL_QUADRIC, 2.6)),
 }
 #: The default tops of each pass, ``(neighbors, calibration)``: full fits (both models)
 #: above the ladder. A top fits every ``stride``-th of its sorted neighbors, ``stride =
@@ -95,6 +125,20 @@ SIGMA_GROWTH = 2.0
 BIAS_SLACK = 1.5
 #: Relative floor of sigma (times 1 / h): noise-free fits are exact only up to rounding.
 SIGMA_FLOOR = 1e-7
+#: Combined standard errors, as a share of ``gamma``, by which a kept fit must disagree with
+#: a smaller Monge rung before that rung may replace it (:func:`_least_error`). A false switch
+#: costs the ratio of the two sigmas, so it must be rare on smooth shapes. At gamma 3.5: with
+#: 2.5 a 10,000-point Bezier patch at 0.5 % noise erred 0.046 (0.039 without switching), with
+#: 3 0.042; the filleted box's fillets at 0.05 %: 0.205, 0.238 with 3, 0.273 with 3.5. A share
+#: of gamma so that the dense share's wider gamma (DENSE_GAMMA_SCALE in
+#: curvature.estimators.auto) widens it too. The 24-point rung never replaces a fit (as in
+#: Lepski's rule, it is too noisy to judge the others): it took the thin plate's rims
+#: (radius 2 spacings, 0.1 %) from 15.7 to 9.9, but its chance readings of 6 to 9.6 on a
+#: noisy plane too.
+SWITCH_SLACK = 3.0 / 3.5
+#: Smallest share of a kept fit's bias its difference with a smaller fit is read as (patches of
+#: nearly equal size say little of how the bias grows).
+BIAS_SHARE_MIN = 0.25
 # A foot point farther than this many fit units from the anchor means the fit missed it.
 FOOT_LIMIT = 2.0
 
@@ -149,9 +193,12 @@ def scale_sigma(distance, h, count, calib):
 
 
 @njit(cache=True)
-def _monge_rung(points, field, p, nbr, quad, circular):
+def _monge_rung(points, field, p, nbr, quad, circular, frame):
     """Monge quadric over ``p`` and ``nbr`` (``circular`` rounds of the circular correction),
     packed like the normal-constrained quadric.
+
+    ``frame`` (shape (3, 3)) receives the fit's unit normal, the principal direction of the
+    curvature smaller in magnitude (along a ridge) and the one across it, as rows.
 
     Returns
     -------
@@ -184,12 +231,44 @@ def _monge_rung(points, field, p, nbr, quad, circular):
     n_p = field[p]
     if g[0] * n_p[0] + g[1] * n_p[1] + g[2] * n_p[2] < 0.0:
         a, b, c, g = -a, -b, -c, -g
-    c1, c2, _, _, _ = shape_operator(g, 2.0 * a)
+    c1, c2, n, d1, d2 = shape_operator(g, 2.0 * a)
+    along, across = (d2, d1) if abs(c2) < abs(c1) else (d1, d2)
+    for i in range(3):
+        frame[0, i], frame[1, i], frame[2, i] = n[i], along[i], across[i]
     quad[0], quad[1], quad[2] = a[0, 0], a[1, 1], a[2, 2]
     quad[3], quad[4], quad[5] = a[0, 1], a[0, 2], a[1, 2]
     quad[6], quad[7], quad[8] = b[0], b[1], b[2]
     quad[9] = c
     return OK, h, sampson_rms(a, b, c, xs) * h, c1 / h, c2 / h
+
+
+@njit(cache=True)
+def _ridge_patch(points, p, nbr, count, frame):
+    """The ``count`` points of ``nbr`` nearest to p in the metric that shrinks distances along
+    ``frame[1]`` (a ridge's direction) by :data:`RIDGE_ASPECT`, and the RMS spread of
+    their offsets across it, times sqrt 2 (the RMS distance of an isotropic patch of that
+    width, the ``h`` of :func:`scale_sigma`)."""
+    pool = nbr.shape[0]
+    metric = np.empty(pool)
+    px, py, pz = points[p, 0], points[p, 1], points[p, 2]
+    for i in range(pool):
+        x, y, z = points[nbr[i], 0] - px, points[nbr[i], 1] - py, points[nbr[i], 2] - pz
+        a = (x * frame[1, 0] + y * frame[1, 1] + z * frame[1, 2]) / RIDGE_ASPECT
+        b = x * frame[2, 0] + y * frame[2, 1] + z * frame[2, 2]
+        c = x * frame[0, 0] + y * frame[0, 1] + z * frame[0, 2]
+        metric[i] = a * a + b * b + c * c
+    bound = np.partition(metric.copy(), count - 1)[count - 1]
+    out = np.empty(count, nbr.dtype)
+    used = 0
+    ss = 0.0
+    for i in range(pool):
+        if metric[i] <= bound and used < count:
+            out[used] = nbr[i]
+            x, y, z = points[nbr[i], 0] - px, points[nbr[i], 1] - py, points[nbr[i], 2] - pz
+            b = x * frame[2, 0] + y * frame[2, 1] + z * frame[2, 2]
+            ss += b * b
+            used += 1
+    return out[:used], np.sqrt(2.0 * ss / max(used, 1))
 
 
 @njit(cache=True)
@@ -205,29 +284,52 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out):
     ladder, kinds : ndarray, shape (l,), int64
     quads : ndarray, shape (l, N_QUAD)
         Output: each rung's packed quadric.
-    out : ndarray, shape (l, 5)
-        Output per rung: ok (1 or 0), k1, k2, residual distance, h (the quadric's unit).
+    out : ndarray, shape (l, 6)
+        Output per rung: ok (1; 2 for a Monge rung over the noise limit,
+        :data:`MONGE_NOISE_LIMIT`; 0 for none), k1, k2, residual distance, h (the quadric's
+        unit) and the spread its standard error uses (h, but the width across the ridge for a
+        ridge rung).
     """
     origin = np.zeros(3)
+    frame = np.empty((3, 3))
+    framed = False  # whether frame holds the directions of a circular Monge rung
     for li in range(ladder.shape[0]):
         out[li, 0] = 0.0
         s = ladder[li]
-        if s >= nbr.shape[0]:
+        spread = 0.0
+        if kinds[li] == KIND_MONGE_RIDGE:
+            # A ridge rung needs the directions of a smaller fit and a list twice its size.
+            if not framed or 2 * s > nbr.shape[0]:
+                continue
+            pool = nbr[:min(nbr.shape[0], RIDGE_POOL)]
+            patch, spread = _ridge_patch(points, p, pool, s, frame)
+            st, h, d, c1, c2 = _monge_rung(points, field, p, patch, quads[li],
+                                           CIRCULAR_ROUNDS, np.empty((3, 3)))
+        elif s >= nbr.shape[0]:
             continue
-        if kinds[li] != KIND_NORMAL_QUADRIC:
+        elif kinds[li] != KIND_NORMAL_QUADRIC:
             rounds = CIRCULAR_ROUNDS if kinds[li] == KIND_MONGE_CIRCULAR else 0
-            st, h, d, c1, c2 = _monge_rung(points, field, p, nbr[:s], quads[li], rounds)
+            st, h, d, c1, c2 = _monge_rung(points, field, p, nbr[:s], quads[li], rounds, frame)
+            if st == OK and kinds[li] == KIND_MONGE_CIRCULAR:
+                # A ridge's direction: its curvature well below the one across it.
+                small, big = min(abs(c1), abs(c2)), max(abs(c1), abs(c2))
+                framed = small <= RIDGE_RATIO * big
         else:
             st, h, _, d = regress_normal_quadric(points, field, p, nbr[:s], True, quads[li])
             if st == OK:
                 st, c1, c2, _, _, _ = curvature_from_quadric(quads[li], h, origin, FOOT_LIMIT)
         if st != OK or not supported(c1, c2, h):
             continue
-        out[li, 0] = 1.0
+        # A height fit within noise comparable to its patch is biased, not noisy: a last
+        # resort (ok = 2), used only where no other fit is.
+        limited = kinds[li] != KIND_NORMAL_QUADRIC and \
+            d > MONGE_NOISE_LIMIT * (spread if spread > 0.0 else h)
+        out[li, 0] = 2.0 if limited else 1.0
         out[li, 1] = c1
         out[li, 2] = c2
         out[li, 3] = d
         out[li, 4] = h
+        out[li, 5] = spread if spread > 0.0 else h
 
 
 @njit(cache=True)
@@ -274,16 +376,78 @@ def _lepski(est, sg, gamma, growth, first_top):
 
 
 @njit(cache=True)
-def _bias(est, sg, best):
-    """Disagreement of fit ``best`` with the smaller usable fits beyond their errors."""
+def _bias(est, sg, best, extrapolate=True):
+    """Bias of fit ``best`` from its disagreement with the smaller usable fits beyond their
+    errors; ``extrapolate``d to zero size: a bias growing as h^2 (the first term a quadric
+    cannot follow) differs between patches of h_b and h_r by (1 - h_r^2 / h_b^2) of the wider
+    one's, so a difference with the next smaller fit (half the points, h^2 halved) is half
+    of it."""
     out = 0.0
+    hb = est[best, 5] * est[best, 5]
     for r in range(best):
         if not np.isfinite(sg[r]):
             continue
         slack = BIAS_SLACK * np.sqrt(sg[r] * sg[r] + sg[best] * sg[best])
+        grow = 1.0
+        if extrapolate:
+            share = 1.0 - est[r, 5] * est[r, 5] / hb if hb > 0.0 else 1.0
+            grow = 1.0 / max(share, BIAS_SHARE_MIN)
         for i in (1, 2):
-            out = max(out, abs(est[best, i] - est[r, i]) - slack)
+            out = max(out, grow * (abs(est[best, i] - est[r, i]) - slack))
     return out
+
+
+@njit(cache=True)
+def _pair_bias(est, sg, best, r, z):
+    """Disagreement of fit ``best`` with fit ``r`` beyond ``z`` times their combined errors."""
+    slack = z * np.sqrt(sg[r] * sg[r] + sg[best] * sg[best])
+    return max(0.0, abs(est[best, 1] - est[r, 1]) - slack, abs(est[best, 2] - est[r, 2]) - slack)
+
+
+@njit(cache=True)
+def _agree(est, sg, a, b, gamma):
+    """Whether fits ``a`` and ``b`` agree within ``gamma`` times the sum of their sigmas."""
+    tol = gamma * (sg[a] + sg[b])
+    return abs(est[a, 1] - est[b, 1]) <= tol and abs(est[a, 2] - est[b, 2]) <= tol
+
+
+@njit(cache=True)
+def _least_error(est, sg, best, kinds, gamma):
+    """Fit ``best`` (Lepski's choice) or a smaller positional rung that shows best biased.
+
+    Lepski's rule passes a wide fit whose bias hides within the noise of the smaller fits
+    (a blade's leading edge, k = 20: the 96-point normal fit passes against the 48-point rung
+    and reads 2.5 off). A Monge rung r (circular or ridge; they do not depend on the stage-1
+    normals, whose smoothing biases every normal fit alike) above the first replaces it where
+    their disagreement beyond :data:`SWITCH_SLACK` times ``gamma`` combined errors, d, makes
+    best's expected error ``sigma_b^2 + d^2`` exceed r's own, ``sigma_r^2 + bias_r^2`` (bias_r
+    against the fits below r, :func:`_bias`), and r agrees with every other usable Monge rung
+    below best within ``gamma`` (a chance outlier among them shows nothing); of several such
+    the least. Without a disagreement nothing switches: a smaller sigma alone does not make a
+    smaller fit better (the normal fits' sigmas are below the tops' on a torus, their errors
+    above).
+    """
+    keep = best
+    least = np.inf
+    top = min(best, kinds.shape[0])
+    for r in range(1, top):
+        if not np.isfinite(sg[r]) or kinds[r] == KIND_NORMAL_QUADRIC:
+            continue
+        shown = _pair_bias(est, sg, best, r, gamma * SWITCH_SLACK)
+        if shown == 0.0:
+            continue
+        e = sg[r] * sg[r] + _bias(est, sg, r, False) ** 2
+        if not (e < least and e < sg[best] * sg[best] + shown * shown):
+            continue
+        consistent = True
+        for m in range(top):
+            if m != r and np.isfinite(sg[m]) and kinds[m] != KIND_NORMAL_QUADRIC and \
+                    not _agree(est, sg, r, m, gamma):
+                consistent = False
+                break
+        if consistent:
+            keep, least = r, e
+    return keep
 
 
 @njit(parallel=True, cache=True)
@@ -330,7 +494,7 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
         nbr = indices[indptr[j]:indptr[j + 1]]
         full = nbr.shape[0]
         quads = np.empty((levels, N_QUAD))
-        est = np.empty((levels + ntop, 5))
+        est = np.empty((levels + ntop, 6))
         ladder_estimates(points, field, p, nbr, ladder, kinds, quads, est)
         # Every top's full fit (both models) into scratch rows; the kept one is copied out.
         t_coef = np.empty((ntop,) + coef.shape[1:])
@@ -360,14 +524,22 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
             if t_status[t] == OK and supported(fk1, fk2, fh):
                 est[row, 0] = 1.0
                 est[row, 1], est[row, 2], est[row, 3], est[row, 4] = fk1, fk2, fd, fh
+                est[row, 5] = fh
         sg = np.full(levels + ntop, np.inf)
         for li in range(levels + ntop):
             if est[li, 0] == 1.0:
                 s = sizes[li]
                 if li >= levels:
                     s = (s + strides[li - levels] - 1) // strides[li - levels]
-                sg[li] = scale_sigma(est[li, 3], est[li, 4], s, calib[li])
+                sg[li] = scale_sigma(est[li, 3], est[li, 5], s, calib[li])
         best = _lepski(est, sg, gamma, growth, levels)
+        if best < 0:  # nothing else usable: the noise-limited Monge rungs (ladder_estimates)
+            for li in range(levels):
+                if est[li, 0] == 2.0:
+                    sg[li] = scale_sigma(est[li, 3], est[li, 5], sizes[li], calib[li])
+            best = _lepski(est, sg, gamma, growth, levels)
+        if best > 0:
+            best = _least_error(est, sg, best, kinds, gamma)
         # The top to report when nothing is usable: the largest that fitted, else the first
         # (its status stands; a wider top is only tried where the one below it was usable).
         keep = ntop - 1
