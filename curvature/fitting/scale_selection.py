@@ -292,6 +292,7 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out):
     """
     origin = np.zeros(3)
     frame = np.empty((3, 3))
+    scratch = np.empty((3, 3))  # the ridge rung's own frame, unused
     framed = False  # whether frame holds the directions of a circular Monge rung
     for li in range(ladder.shape[0]):
         out[li, 0] = 0.0
@@ -304,7 +305,7 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out):
             pool = nbr[:min(nbr.shape[0], RIDGE_POOL)]
             patch, spread = _ridge_patch(points, p, pool, s, frame)
             st, h, d, c1, c2 = _monge_rung(points, field, p, patch, quads[li],
-                                           CIRCULAR_ROUNDS, np.empty((3, 3)))
+                                           CIRCULAR_ROUNDS, scratch)
         elif s >= nbr.shape[0]:
             continue
         elif kinds[li] != KIND_NORMAL_QUADRIC:
@@ -322,14 +323,22 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out):
             continue
         # A height fit within noise comparable to its patch is biased, not noisy: a last
         # resort (ok = 2), used only where no other fit is.
-        limited = kinds[li] != KIND_NORMAL_QUADRIC and \
-            d > MONGE_NOISE_LIMIT * (spread if spread > 0.0 else h)
+        if spread == 0.0:
+            spread = h
+        limited = kinds[li] != KIND_NORMAL_QUADRIC and d > MONGE_NOISE_LIMIT * spread
         out[li, 0] = 2.0 if limited else 1.0
         out[li, 1] = c1
         out[li, 2] = c2
         out[li, 3] = d
         out[li, 4] = h
-        out[li, 5] = spread if spread > 0.0 else h
+        out[li, 5] = spread
+
+
+@njit(cache=True)
+def _agree(est, sg, a, b, gamma):
+    """Whether fits ``a`` and ``b`` agree within ``gamma`` times the sum of their sigmas."""
+    tol = gamma * (sg[a] + sg[b])
+    return abs(est[a, 1] - est[b, 1]) <= tol and abs(est[a, 2] - est[b, 2]) <= tol
 
 
 @njit(cache=True)
@@ -362,8 +371,7 @@ def _lepski(est, sg, gamma, growth, first_top):
             smallest = min(smallest, sg[r])
             if r == 0 and c > 1:
                 continue
-            tol = gamma * (sg[r] + sg[c])
-            if abs(est[c, 1] - est[r, 1]) > tol or abs(est[c, 2] - est[r, 2]) > tol:
+            if not _agree(est, sg, c, r, gamma):
                 agrees = False
                 break
         if agrees and c > first_top and np.isfinite(sg[c - 1]):
@@ -373,6 +381,13 @@ def _lepski(est, sg, gamma, growth, first_top):
         if agrees and sg[c] <= growth * smallest:
             return c
     return -1
+
+
+@njit(cache=True)
+def _pair_bias(est, sg, best, r, z):
+    """Disagreement of fit ``best`` with fit ``r`` beyond ``z`` times their combined errors."""
+    slack = z * np.sqrt(sg[r] * sg[r] + sg[best] * sg[best])
+    return max(0.0, abs(est[best, 1] - est[r, 1]) - slack, abs(est[best, 2] - est[r, 2]) - slack)
 
 
 @njit(cache=True)
@@ -387,28 +402,12 @@ def _bias(est, sg, best, extrapolate=True):
     for r in range(best):
         if not np.isfinite(sg[r]):
             continue
-        slack = BIAS_SLACK * np.sqrt(sg[r] * sg[r] + sg[best] * sg[best])
         grow = 1.0
         if extrapolate:
             share = 1.0 - est[r, 5] * est[r, 5] / hb if hb > 0.0 else 1.0
             grow = 1.0 / max(share, BIAS_SHARE_MIN)
-        for i in (1, 2):
-            out = max(out, grow * (abs(est[best, i] - est[r, i]) - slack))
+        out = max(out, grow * _pair_bias(est, sg, best, r, BIAS_SLACK))
     return out
-
-
-@njit(cache=True)
-def _pair_bias(est, sg, best, r, z):
-    """Disagreement of fit ``best`` with fit ``r`` beyond ``z`` times their combined errors."""
-    slack = z * np.sqrt(sg[r] * sg[r] + sg[best] * sg[best])
-    return max(0.0, abs(est[best, 1] - est[r, 1]) - slack, abs(est[best, 2] - est[r, 2]) - slack)
-
-
-@njit(cache=True)
-def _agree(est, sg, a, b, gamma):
-    """Whether fits ``a`` and ``b`` agree within ``gamma`` times the sum of their sigmas."""
-    tol = gamma * (sg[a] + sg[b])
-    return abs(est[a, 1] - est[b, 1]) <= tol and abs(est[a, 2] - est[b, 2]) <= tol
 
 
 @njit(cache=True)
