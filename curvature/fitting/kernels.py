@@ -12,8 +12,8 @@ from numba import njit, prange
 
 from .linalg import (
     cholesky,
+    eigh3,
     generalized_smallest,
-    jacobi_eigh,
     smallest_eigvec,
     solve_lower,
     solve_upper_t,
@@ -167,7 +167,7 @@ def principal_axes(xs):
     cov[1, 0] = cov[0, 1]
     cov[2, 0] = cov[0, 2]
     cov[2, 1] = cov[1, 2]
-    return jacobi_eigh(cov / m)
+    return eigh3(cov / m)
 
 
 @njit(cache=True)
@@ -213,26 +213,59 @@ def fit_monge(xs, v, circular=0):
     frame[:, 0] = v[:, 2]
     frame[:, 1] = v[:, 1]
     frame[:, 2] = np.cross(v[:, 2], v[:, 1])
-    ata = np.zeros((6, 6))
-    atb = np.zeros(6)
-    row = np.empty(6)
+    # The normal equations of the rows (u^2, uv, v^2, u, v, 1), summed in scalars (kept in
+    # registers; an array's entries are stored back at every point).
+    f00, f01, f02 = frame[0, 0], frame[0, 1], frame[0, 2]
+    f10, f11, f12 = frame[1, 0], frame[1, 1], frame[1, 2]
+    f20, f21, f22 = frame[2, 0], frame[2, 1], frame[2, 2]
+    s00 = s01 = s02 = s03 = s04 = s05 = 0.0
+    s11 = s12 = s13 = s14 = s15 = 0.0
+    s22 = s23 = s24 = s25 = 0.0
+    s33 = s34 = s35 = s44 = s45 = s55 = 0.0
+    b0 = b1 = b2 = b3 = b4 = b5 = 0.0
     for i in range(m):
-        u = xs[i, 0] * frame[0, 0] + xs[i, 1] * frame[1, 0] + xs[i, 2] * frame[2, 0]
-        vv = xs[i, 0] * frame[0, 1] + xs[i, 1] * frame[1, 1] + xs[i, 2] * frame[2, 1]
-        h = xs[i, 0] * frame[0, 2] + xs[i, 1] * frame[1, 2] + xs[i, 2] * frame[2, 2]
-        row[0] = u * u
-        row[1] = u * vv
-        row[2] = vv * vv
-        row[3] = u
-        row[4] = vv
-        row[5] = 1.0
-        for r in range(6):
-            atb[r] += row[r] * h
-            for s in range(r, 6):
-                ata[r, s] += row[r] * row[s]
+        x0, x1, x2 = xs[i, 0], xs[i, 1], xs[i, 2]
+        u = x0 * f00 + x1 * f10 + x2 * f20
+        vv = x0 * f01 + x1 * f11 + x2 * f21
+        h = x0 * f02 + x1 * f12 + x2 * f22
+        r0, r1, r2, r3, r4 = u * u, u * vv, vv * vv, u, vv
+        b0 += r0 * h
+        s00 += r0 * r0
+        s01 += r0 * r1
+        s02 += r0 * r2
+        s03 += r0 * r3
+        s04 += r0 * r4
+        s05 += r0 * 1.0
+        b1 += r1 * h
+        s11 += r1 * r1
+        s12 += r1 * r2
+        s13 += r1 * r3
+        s14 += r1 * r4
+        s15 += r1 * 1.0
+        b2 += r2 * h
+        s22 += r2 * r2
+        s23 += r2 * r3
+        s24 += r2 * r4
+        s25 += r2 * 1.0
+        b3 += r3 * h
+        s33 += r3 * r3
+        s34 += r3 * r4
+        s35 += r3 * 1.0
+        b4 += r4 * h
+        s44 += r4 * r4
+        s45 += r4 * 1.0
+        b5 += 1.0 * h
+        s55 += 1.0 * 1.0
+    ata = np.empty((6, 6))
+    atb = np.empty(6)
+    sums = (s00, s01, s02, s03, s04, s05, s11, s12, s13, s14, s15, s22, s23, s24, s25,
+            s33, s34, s35, s44, s45, s55)
+    t = 0
     for r in range(6):
-        for s in range(r + 1, 6):
-            ata[s, r] = ata[r, s]
+        for c in range(r, 6):
+            ata[r, c] = ata[c, r] = sums[t]
+            t += 1
+    atb[0], atb[1], atb[2], atb[3], atb[4], atb[5] = b0, b1, b2, b3, b4, b5
     l, ok = cholesky(ata, 1e-13)
     if not ok:
         return np.zeros((3, 3)), np.zeros(3), 0.0, False
@@ -267,8 +300,19 @@ def fit_monge(xs, v, circular=0):
     a_loc[0, 1] = a_loc[1, 0] = 0.5 * coef[1]
     a_loc[2, 2] = t
     b_loc = np.array([coef[3], coef[4], -1.0])
-    a = frame @ a_loc @ frame.T
-    b = frame @ b_loc
+    # frame @ a_loc @ frame.T and frame @ b_loc written out: numba's @ calls BLAS, whose
+    # call overhead is most of the time of a 3x3 product (this runs once per rung fit).
+    tmp = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            tmp[i, j] = frame[i, 0] * a_loc[0, j] + frame[i, 1] * a_loc[1, j] \
+                + frame[i, 2] * a_loc[2, j]
+    a = np.empty((3, 3))
+    b = np.empty(3)
+    for i in range(3):
+        for j in range(3):
+            a[i, j] = tmp[i, 0] * frame[j, 0] + tmp[i, 1] * frame[j, 1] + tmp[i, 2] * frame[j, 2]
+        b[i] = frame[i, 0] * b_loc[0] + frame[i, 1] * b_loc[1] + frame[i, 2] * b_loc[2]
     return a, b, coef[5], True
 
 

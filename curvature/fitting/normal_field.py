@@ -17,8 +17,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .kernels import gather_local, principal_axes
-from .linalg import cholesky, dot, solve_lower, solve_upper_t, total
+from .linalg import cholesky, dot, jacobi3, solve_lower, solve_upper_t, total
 from .normal_quadric import (
     curvature_from_quadric,
     quadric_curvature_xyz,
@@ -51,6 +50,8 @@ FOOT_LIMIT = 4.0
 # show (a sampled patch does not fold over within itself); it is what an implicit model does
 # next to a feature it cannot follow (flat faces beside a fillet read 1e2 to 1e5 otherwise).
 SUPPORT = 2.0
+# Query points per parallel block of pca_normals (its two 3x3 scratch arrays per block).
+PCA_BLOCK = 256
 
 
 @njit(cache=True)
@@ -63,6 +64,10 @@ def supported(c1, c2, h):
 def pca_normals(points, query, indptr, indices, out):
     """Unit PCA normals (arbitrary sign) of the query points over their neighborhoods.
 
+    The arithmetic of :func:`~curvature.fitting.kernels.gather_local` and
+    :func:`~curvature.fitting.kernels.principal_axes`, in the same order (the same bits),
+    without their per-point arrays: this runs at every point of the cloud.
+
     Parameters
     ----------
     points : ndarray, shape (n, 3)
@@ -72,16 +77,57 @@ def pca_normals(points, query, indptr, indices, out):
     out : ndarray, shape (m, 3)
         Output normals; NaN where the neighbors do not span a plane.
     """
-    for j in prange(query.shape[0]):
-        nbr = indices[indptr[j]:indptr[j + 1]]
-        xs, scale = gather_local(points, query[j], nbr, True)
-        w, v = principal_axes(xs)
-        if scale > 0.0 and w[1] > 1e-10 * w[2]:
-            for d in range(3):
-                out[j, d] = v[d, 0]
-        else:
-            for d in range(3):
-                out[j, d] = np.nan
+    m_all = query.shape[0]
+    blocks = (m_all + PCA_BLOCK - 1) // PCA_BLOCK
+    for b in prange(blocks):
+        cov = np.empty((3, 3))
+        vec = np.empty((3, 3))
+        for j in range(b * PCA_BLOCK, min(m_all, (b + 1) * PCA_BLOCK)):
+            q = query[j]
+            lo, hi = indptr[j], indptr[j + 1]
+            k = hi - lo
+            px, py, pz = points[q, 0], points[q, 1], points[q, 2]
+            ss = 0.0
+            for i in range(lo, hi):
+                r = indices[i]
+                x, y, z = points[r, 0] - px, points[r, 1] - py, points[r, 2] - pz
+                ss += x * x
+                ss += y * y
+                ss += z * z
+            scale = np.sqrt(ss / k) if k > 0 else 0.0
+            unit = scale if scale > 0.0 else 1.0
+            m = k + 1  # p itself, at the origin
+            cx = cy = cz = 0.0
+            for i in range(lo, hi):
+                r = indices[i]
+                cx += (points[r, 0] - px) / unit
+                cy += (points[r, 1] - py) / unit
+                cz += (points[r, 2] - pz) / unit
+            cx, cy, cz = cx / m, cy / m, cz / m
+            d0, d1, d2 = -cx, -cy, -cz
+            c00, c01, c02 = d0 * d0, d0 * d1, d0 * d2
+            c11, c12, c22 = d1 * d1, d1 * d2, d2 * d2
+            for i in range(lo, hi):
+                r = indices[i]
+                d0 = (points[r, 0] - px) / unit - cx
+                d1 = (points[r, 1] - py) / unit - cy
+                d2 = (points[r, 2] - pz) / unit - cz
+                c00 += d0 * d0
+                c01 += d0 * d1
+                c02 += d0 * d2
+                c11 += d1 * d1
+                c12 += d1 * d2
+                c22 += d2 * d2
+            cov[0, 0], cov[0, 1], cov[0, 2] = c00 / m, c01 / m, c02 / m
+            cov[1, 0], cov[1, 1], cov[1, 2] = cov[0, 1], c11 / m, c12 / m
+            cov[2, 0], cov[2, 1], cov[2, 2] = cov[0, 2], cov[1, 2], c22 / m
+            i0, i1, i2 = jacobi3(cov, vec)
+            if scale > 0.0 and cov[i1, i1] > 1e-10 * cov[i2, i2]:
+                for d in range(3):
+                    out[j, d] = vec[d, i0]
+            else:
+                for d in range(3):
+                    out[j, d] = np.nan
 
 
 @njit(cache=True)

@@ -66,3 +66,35 @@ def test_too_few_neighbors_and_parameter_errors():
         curvature.estimate(pts, "knn", normal_k=20)
     with pytest.raises(curvature.ParameterError, match="'normal_k' must be >= 6"):
         curvature.estimate(pts, "knn", fit="nfr", normal_k=3)
+
+
+def test_pca_normals_are_the_smallest_principal_axis_bit_for_bit():
+    """pca_normals (no per-point arrays) equals principal_axes over gather_local: the same
+    normals to the bit, NaN where the neighbors do not span a plane (a line, duplicates)."""
+    from curvature.fitting.kernels import gather_local, principal_axes
+    from curvature.fitting.normal_field import pca_normals
+
+    cloud = synthetic.torus(2000, noise=0.3, seed=2).points
+    line = np.c_[np.linspace(0.0, 1.0, 30), np.zeros(30), np.zeros(30)]
+    points = np.concatenate([cloud, line, np.zeros((20, 3))])
+    n = points.shape[0]
+    query = np.arange(n, dtype=np.int64)
+    k = 12
+    nbr = np.empty((n, k), np.int64)
+    for block in (slice(0, 2000), slice(2000, 2030), slice(2030, n)):
+        ids = np.arange(block.start, block.stop)
+        for i in ids:
+            others = ids[ids != i]
+            d = ((points[others] - points[i]) ** 2).sum(axis=1)
+            nbr[i] = others[np.argsort(d, kind="stable")[:k]]
+    indptr = np.arange(0, n * k + 1, k, dtype=np.int64)
+    out = np.empty((n, 3))
+    pca_normals(points, query, indptr, nbr.ravel(), out)
+    for i in range(n):
+        xs, scale = gather_local(points, i, nbr[i], True)
+        w, v = principal_axes(xs)
+        if scale > 0.0 and w[1] > 1e-10 * w[2]:
+            assert np.array_equal(out[i], v[:, 0]), i
+        else:
+            assert np.isnan(out[i]).all(), i
+    assert np.isnan(out[2000:]).all(axis=1).all()  # the line and the duplicates
