@@ -44,7 +44,7 @@ from .request import (
     resolve_request,
     resolve_tile_points,
 )
-from .spatial_order import inverse_permutation, morton_order
+from .spatial_order import inverse_permutation, morton_order, take_rows
 from .threads import numba_threads
 from .tiling import run_tiled
 
@@ -168,7 +168,8 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
         timings["orientation"] = time.perf_counter() - t0
     del graph
     release_freed_memory()
-    res = unpermute(res, inv, pts, tri)
+    with numba_threads(req.workers):
+        res = unpermute(res, inv, pts, tri)
     res.mean[:] = 0.5 * (res.k1 + res.k2)
     res.gaussian[:] = res.k1 * res.k2
     res.uncertain[:] = uncertain(res.k1, res.k2, res.k1_std, res.k2_std, res.neighbor_count,
@@ -197,7 +198,7 @@ def unpermute(res: CurvatureResult, inv: np.ndarray, pts: np.ndarray, faces) -> 
         if name in DERIVED:
             fields[name] = np.empty(inv.shape[0], fields[name].dtype)
         else:
-            fields[name] = fields[name][inv]
+            fields[name] = take_rows(fields[name], inv)
         setattr(res, name, fields[name])
     return CurvatureResult(points=pts, faces=faces, **fields)
 

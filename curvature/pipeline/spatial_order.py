@@ -8,6 +8,7 @@ unrelated to space, which makes large clouds several times slower.
 from __future__ import annotations
 
 import numpy as np
+from numba import njit, prange
 
 BITS = 21  # per axis: 3 * 21 = 63 bits fit an unsigned 64-bit key
 
@@ -50,3 +51,38 @@ def inverse_permutation(order: np.ndarray) -> np.ndarray:
     inv = np.empty_like(order)
     inv[order] = np.arange(order.shape[0], dtype=order.dtype)
     return inv
+
+
+@njit(parallel=True, cache=True)
+def _take_scalars(src, idx, out):
+    for i in prange(idx.shape[0]):
+        out[i] = src[idx[i]]
+
+
+@njit(parallel=True, cache=True)
+def _take_vectors(src, idx, out):
+    for i in prange(idx.shape[0]):
+        for d in range(3):
+            out[i, d] = src[idx[i], d]
+
+
+def take_rows(src: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """``src[idx]`` along the first axis; float64 fields (n,) and (n, 3), most of a result's
+    bytes, on every numba thread (numpy's gather runs on one: a 1M-point result's return to
+    input order took 0.25 s).
+
+    Parameters
+    ----------
+    src : ndarray, shape (n,) or (n, c)
+    idx : ndarray, shape (m,), int64
+
+    Returns
+    -------
+    ndarray, shape (m,) or (m, c)
+    """
+    if src.dtype == np.float64 and src.flags.c_contiguous and (
+            src.ndim == 1 or (src.ndim == 2 and src.shape[1] == 3)):
+        out = np.empty((idx.shape[0],) + src.shape[1:])
+        (_take_scalars if src.ndim == 1 else _take_vectors)(src, idx, out)
+        return out
+    return src[idx]
