@@ -365,8 +365,15 @@ def _relative_median(residuals: np.ndarray, spacing: float) -> float:
     return float(np.median(finite)) / spacing if finite.size and spacing > 0 else np.inf
 
 
+def plan_sample(points: np.ndarray) -> np.ndarray:
+    """The plan's geometric subsample: one point per cell of :data:`PLAN_CELLS` across the
+    bounding-box diagonal, shape (s,), int64, increasing."""
+    sample, _ = grid_cells(points, points.min(axis=0), coarse_cell(points, PLAN_CELLS))
+    return sample
+
+
 def plan_auto(points: np.ndarray, tree: tuple, noise_threshold: float,
-              dense_noise: float = np.inf) -> AutoPlan:
+              dense_noise: float = np.inf, sample: np.ndarray | None = None) -> AutoPlan:
     """Measure spacing and noise on a geometric subsample of the cloud.
 
     Parameters
@@ -380,13 +387,16 @@ def plan_auto(points: np.ndarray, tree: tuple, noise_threshold: float,
     dense_noise : float
         Relative noise above which the fits see a thinned cloud (:data:`DENSE_TARGET`); its
         own plan is measured on the whole cloud thinned.
+    sample : ndarray, shape (s,), int64, optional
+        :func:`plan_sample` of ``points``, if the caller has it already.
 
     Returns
     -------
     AutoPlan
     """
     origin = points.min(axis=0)
-    sample, _ = grid_cells(points, origin, coarse_cell(points, PLAN_CELLS))
+    if sample is None:
+        sample = plan_sample(points)
     k = min(PLAN_K, points.shape[0] - 1)
     indptr, indices, d2 = knn_csr(points, tree, sample, k)
     spacing = float(np.median(np.sqrt(d2[:, -1])))
@@ -472,20 +482,25 @@ class AutoRun:
         # RMS neighbor distance of each clean fit (its standard error's unit)
         self.clean_h = np.empty(points.shape[0]) if self.plan.clean else None
 
-    def run(self, res, graph, orient_k: int) -> None:
-        """Fill every output array of ``res`` and the orientation graph (n, orient_k)."""
+    def run(self, res, graph, orient_k: int, rows: np.ndarray | None = None) -> None:
+        """Fill every output array of ``res`` and the orientation graph (n, orient_k).
+
+        ``rows`` (increasing int64 indices), if given, are the only points whose results are
+        wanted (a tile's own points): dense clouds then skip the other points' results and
+        their stage-1 work; other clouds compute every row.
+        """
         n = self.points.shape[0]
         k_stage1 = min(max(self.params["normal_k"], PLAN_K, orient_k), n - 1)
         kc = min(self.fit_k(), n - 1)
-        self._total = 2 * n
         self._done = 0
+        if self.plan.dense is not None:
+            self._dense(res, graph, np.arange(n, dtype=np.int64) if rows is None else rows,
+                        min(self.params["normal_k"], k_stage1))
+            return
+        self._total = 2 * n
         t0 = time.perf_counter()
         field, radius = self._stage1(res, graph, k_stage1)
         release_freed_memory()
-        if self.plan.dense is not None:
-            self.timings["stage1"] = time.perf_counter() - t0
-            self._dense(res)
-            return
         # Anchors among the inliers (an outlier cannot anchor its cell's fits); outliers'
         # normals are left out of every fit.
         reps, owner = grid_cells(self.points, np.asarray(self.plan.origin), self.plan.cell,
@@ -777,51 +792,49 @@ class AutoRun:
         self.timings["refit"] = time.perf_counter() - t0
         return own[done], (reach[done] if reach is not None else None)
 
-    def _dense(self, res) -> None:
-        """Fits on a thinned share of a dense noisy cloud (``plan.dense``), read at every point.
+    def _dense(self, res, graph, rows, normal_k: int) -> None:
+        """Fits on a thinned share of a dense noisy cloud (``plan.dense``), read at ``rows``.
 
         The thinned points run the noisy branch as a cloud of their own, with stage-1 normals
         over as many of the whole cloud's points as the share leaves out (normal_k / share),
-        so they average more points than the thinned cloud holds; each point reads the model
+        so they average more points than the thinned cloud holds; each row reads the model
         of its nearest thinned point's anchor at its own position.
         """
         n = self.points.shape[0]
         share = self.plan.dense_share
-        keep = ~self.outliers
-        thinned(self.points, share, keep)
-        idx = np.flatnonzero(keep)
+        t0 = time.perf_counter()
+        idx, field, r_normal = self._dense_stage1(graph, rows, normal_k)
+        self.timings["stage1"] = time.perf_counter() - t0
         sub = np.ascontiguousarray(self.points[idx])
+        ns = idx.shape[0]
         params = dict(self.params, scale_gamma=self.params["scale_gamma"] * DENSE_GAMMA_SCALE)
         inner = AutoRun(sub, params, self.chunk_size, None, plan=self.plan.dense,
                         track_reach=self.track_reach)
         inner._tick = self._tick  # its work counts towards this run's progress
-        ns = idx.shape[0]
-        self._total += ns
-        # Stage-1 normals of the thinned points over the whole cloud's neighbors.
-        k = min(int(round(self.params["normal_k"] / share)), DENSE_NORMAL_K, n - 1)
-        field, r_normal = np.empty((ns, 3)), np.empty(ns)
-        step = max(64, self.chunk_size * 24 // k)  # neighbor entries of a 24-neighbor chunk
-        for sl in (slice(i, min(i + step, ns)) for i in range(0, ns, step)):
-            indptr, indices, d2 = knn_csr(self.points, self.tree, idx[sl], k)
-            r_normal[sl] = np.sqrt(d2[:, -1])
-            pca_normals(self.points, idx[sl], indptr, indices, field[sl])
-            self._tick(sl.stop - sl.start)
         reps, owner = grid_cells(sub, np.asarray(inner.plan.origin), inner.plan.cell)
-        self._total += 2 * reps.shape[0]
+        t0 = time.perf_counter()
+        # Each row reads the anchor of its nearest thinned point; the second pass fits only
+        # the anchors some row reads (a tile's halo holds many more).
+        # (scipy's tree: queries at points that are not in the tree's cloud)
+        _, nearest = cKDTree(sub).query(self.points[rows], k=1,
+                                        workers=numba.get_num_threads())
+        wanted, anchor_of = np.unique(owner[nearest], return_inverse=True)
+        del nearest
+        self.timings["dense nearest"] = time.perf_counter() - t0
+        self._total += reps.shape[0] + wanted.shape[0]
         fits, fit_reach, chosen, err, _ = inner._model(field, r_normal, reps, owner,
-                                                       min(inner.fit_k(), ns - 1))
+                                                       min(inner.fit_k(), ns - 1), wanted)
+        reps = reps[wanted]
+        del field, r_normal, owner, wanted
         self.tree = inner.tree = None  # as in _anchored: the reads need only the fits
         release_freed_memory()
         for name, sec in inner.timings.items():
             self.timings[f"dense {name}"] = sec
         t0 = time.perf_counter()
-        # (scipy's tree: queries at points that are not in the tree's cloud)
-        _, nearest = cKDTree(sub).query(self.points, k=1, workers=numba.get_num_threads())
-        anchor_of = owner[nearest]
         # Thinned points first, then the cloud: one array holds anchors and readers.
         both = np.concatenate([sub, self.points])
-        for sl in self._chunks(n):
-            query = np.arange(sl.start, sl.stop, dtype=np.int64)
+        for sl in self._chunks(rows.shape[0]):
+            query = rows[sl]
             out = _OutputView(res, query, 1.0 / self.plan.spacing)
             nfr_from_anchors(both, ns + query, anchor_of[sl], reps, *fits, *out.arrays)
             # A kept fit over s thinned points spans the patch of s / share points.
@@ -831,15 +844,71 @@ class AutoRun:
         self.timings["dense read"] = time.perf_counter() - t0
         if self.track_reach:
             # As :meth:`_point_reach`, plus the distance to the nearest thinned point, which
-            # decides the anchor.
-            d = np.linalg.norm(self.points - sub[reps[anchor_of]], axis=1)
-            self.reach = 2.0 * d + fit_reach[anchor_of] + np.sqrt(3.0) * inner.plan.cell
+            # decides the anchor; NaN at the rows not computed.
+            self.reach = np.full(n, np.nan)
+            d = np.linalg.norm(self.points[rows] - sub[reps[anchor_of]], axis=1)
+            self.reach[rows] = 2.0 * d + fit_reach[anchor_of] + np.sqrt(3.0) * inner.plan.cell
 
-    def _model(self, field, r_normal, reps, owner, kc):
+    def _dense_stage1(self, graph, rows, normal_k: int):
+        """The stage-1 work of a dense cloud: orientation graph rows at ``rows``; at the
+        points the hash thins to (:func:`~.sampling.thinned`), the outlier tests and the
+        normals over the whole cloud's ``normal_k / share`` neighbors, all from one query.
+
+        Only the thinned points are fitted and the outlier tests only decide which of them
+        are, so no other point needs them; the first ``normal_k`` of a point's neighbors
+        are the ones a ``normal_k`` query gives (ties break by index), so the tests are
+        those of the other branches.
+
+        Returns
+        -------
+        idx : ndarray, shape (s,), int64
+            The thinned points that are no outliers.
+        field, r_normal : ndarray, shapes (s, 3) and (s,)
+            Their normals and the distance to the last neighbor behind each.
+        """
+        n = self.points.shape[0]
+        share = self.plan.dense_share
+        cand = np.ones(n, bool)
+        thinned(self.points, share, cand)
+        cand = np.flatnonzero(cand).astype(np.int64)
+        m = cand.shape[0]
+        self._total = (2 if graph is not None else 1) * rows.shape[0] + m
+        if graph is not None:
+            kg = graph.shape[1]
+            for sl in self._chunks(rows.shape[0]):
+                _, indices, _ = knn_csr(self.points, self.tree, rows[sl], kg)
+                graph[rows[sl]] = indices.reshape(-1, kg)
+                self._tick(sl.stop - sl.start)
+        k = min(max(int(round(self.params["normal_k"] / share)), normal_k), DENSE_NORMAL_K,
+                n - 1)
+        kiso = min(ISOLATION_K, k)
+        field, r_normal = np.empty((m, 3)), np.empty(m)
+        r_isolation, outlier = np.empty(m), np.zeros(m, bool)
+        own = np.empty((m, 3))  # each point's normal over its normal_k neighbors
+        step = max(64, self.chunk_size * 24 // k)  # neighbor entries of a 24-neighbor chunk
+        for sl in (slice(i, min(i + step, m)) for i in range(0, m, step)):
+            query = cand[sl]
+            indptr, indices, d2 = knn_csr(self.points, self.tree, query, k)
+            nbr = indices.reshape(-1, k)
+            r_normal[sl] = np.sqrt(d2[:, -1])
+            r_isolation[sl] = np.sqrt(d2[:, kiso - 1])
+            pca_normals(self.points, query, indptr, indices, field[sl])
+            pca_normals(self.points, query, *_prefix_csr(nbr, normal_k), own[sl])
+            off_surface(self.points, query, np.ascontiguousarray(nbr[:, :normal_k]), own[sl],
+                        self.plan.spacing, outlier[sl])
+            self._tick(sl.stop - sl.start)
+        del own
+        isolated(self.points, self.tree, r_isolation, outlier, rows=cand)
+        self.outliers[cand[outlier]] = True
+        keep = ~outlier
+        return cand[keep], field[keep], r_normal[keep]
+
+    def _model(self, field, r_normal, reps, owner, kc, wanted=None):
         """The anchors' fits of both passes: the first refines the normals (in ``field``),
         the second fits them; returns the second pass's fits, their reach, sizes and standard
         errors (:meth:`_fit_anchors`), and how far each refined normal depends (the reach of
-        the first pass's result with ``track_reach``, else ``r_normal``)."""
+        the first pass's result with ``track_reach``, else ``r_normal``). ``wanted`` (indices
+        into ``reps``), if given, limits the second pass to those anchors, in that order."""
         # How far the first pass's normal of each point depends on: its anchor's fit reads
         # stage-1 normals of the anchor's neighbors, each made from their own neighbors.
         w = r_normal
@@ -847,7 +916,8 @@ class AutoRun:
             t0 = time.perf_counter()
             # Pass 1 only refines normals: Monge rungs would tilt them by their noisy curvature
             # over a cell's width, so its ladder has the normal-fit rungs only.
-            fits, fit_reach, chosen, err = self._fit_anchors(reps, field, kc, w,
+            anchors = reps if wanted is None or not last else reps[wanted]
+            fits, fit_reach, chosen, err = self._fit_anchors(anchors, field, kc, w,
                                                              positional=last)
             if not last:
                 # Refined normals of every point: the first pass's field at the point; the
@@ -1004,4 +1074,4 @@ class _OutputView:
             self.res.mean_std[r] = ANCHORED_MEAN_SHARE * std
 
 
-__all__ = ["AUTO_PARAMS", "AutoPlan", "AutoRun", "grid_cells", "plan_auto"]
+__all__ = ["AUTO_PARAMS", "AutoPlan", "AutoRun", "grid_cells", "plan_auto", "plan_sample"]

@@ -76,7 +76,8 @@ def off_surface(points, query, nbr, normals, spacing, out):
         out[j] = off > OUTLIER_SIGMAS * np.sqrt(ss / k) + OUTLIER_FLOOR * spacing
 
 
-def isolated(points: np.ndarray, tree: tuple, reach: np.ndarray, out: np.ndarray) -> None:
+def isolated(points: np.ndarray, tree: tuple, reach: np.ndarray, out: np.ndarray,
+             rows: np.ndarray | None = None) -> None:
     """Flag the points whose ISOLATION_K-th neighbor is far farther than their neighbors' are.
 
     Parameters
@@ -84,20 +85,31 @@ def isolated(points: np.ndarray, tree: tuple, reach: np.ndarray, out: np.ndarray
     points : ndarray, shape (n, 3)
     tree : tuple
         :func:`~curvature.neighborhoods.kdtree.build_tree` over ``points``.
-    reach : ndarray, shape (n,)
-        Distance of every point to its ISOLATION_K-th nearest neighbor.
-    out : ndarray, shape (n,), bool
-        Set True (in place) where a point is isolated; never cleared.
+    reach : ndarray, shape (m,)
+        Distance of every tested point to its ISOLATION_K-th nearest neighbor.
+    out : ndarray, shape (m,), bool
+        Set True (in place) where a tested point is isolated; never cleared.
+    rows : ndarray, shape (m,), int64, optional
+        The tested points (default: all, m = n). The neighbors' own reach is then measured
+        where it is needed, for the few points that pass the filter below.
     """
     from ..neighborhoods.kdtree import knn_parallel
 
-    # Only points beyond half the threshold of the whole cloud's median can pass it against
+    # Only points beyond half the threshold of the tested points' median can pass it against
     # their neighbors' unless those are denser than the cloud by more than 2: a cheap filter.
     cand = np.flatnonzero(reach > 0.5 * ISOLATION * np.median(reach)).astype(np.int64)
     k = min(ISOLATION_K, points.shape[0] - 1)
     if cand.size == 0 or k < 1:
         return
+    ids = cand if rows is None else rows[cand]
     nbr = np.empty((cand.size, k), np.int64)
-    knn_parallel(points, tree, cand, k, nbr, np.empty((cand.size, k)))
-    local = np.median(reach[nbr], axis=1)
+    knn_parallel(points, tree, ids, k, nbr, np.empty((cand.size, k)))
+    if rows is None:
+        near = reach[nbr]
+    else:
+        uniq, inv = np.unique(nbr, return_inverse=True)
+        d2 = np.empty((uniq.size, k))
+        knn_parallel(points, tree, uniq, k, np.empty((uniq.size, k), np.int64), d2)
+        near = np.sqrt(d2[:, k - 1])[inv.reshape(nbr.shape)]
+    local = np.median(near, axis=1)
     out[cand[reach[cand] > ISOLATION * local]] = True

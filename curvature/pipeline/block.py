@@ -73,7 +73,7 @@ def compute_block(spts, s_faces, req: Request, query=None, *, progress=None, pla
         graph = np.empty((n, ORIENT_K), np.int32) if want_graph else None
         run = AutoRun(spts, req.auto_params, req.chunk_size, progress, plan=plan,
                       track_reach=track_reach)
-        run.run(res, graph, ORIENT_K)
+        run.run(res, graph, ORIENT_K, None if whole else query)
         timings.update(run.timings)
         info = {"method": "auto", "params": req.auto_params,
                 "fit": "implicit" if run.plan.clean else "nfr", "plan": run.plan.to_dict()}

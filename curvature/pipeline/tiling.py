@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..estimators.auto import PLAN_CELLS, coarse_cell, grid_cells, knn_csr, plan_auto
+from ..estimators.auto import knn_csr, plan_auto, plan_sample
 from ..neighborhoods import make_finder
 from ..neighborhoods.kdtree import build_tree
 from ..orientation import ORIENT_K
@@ -136,9 +136,11 @@ def halo_guess(req: Request, spacing: float, fit_radius: float = math.nan) -> fl
     return HALO_MARGIN * reach
 
 
-def fit_radius(spts: np.ndarray, tree: tuple, k: int) -> float:
-    """Median distance to the ``k``-th neighbor over the plan's geometric sample."""
-    sample, _ = grid_cells(spts, spts.min(axis=0), coarse_cell(spts, PLAN_CELLS))
+def fit_radius(spts: np.ndarray, tree: tuple, k: int, sample: np.ndarray | None = None) -> float:
+    """Median distance to the ``k``-th neighbor over the plan's geometric sample
+    (:func:`~curvature.estimators.auto.plan_sample`, computed if not given)."""
+    if sample is None:
+        sample = plan_sample(spts)
     k = min(k, spts.shape[0] - 1)
     _, _, d2 = knn_csr(spts, tree, sample, k)
     return float(np.median(np.sqrt(d2[:, -1])))
@@ -207,7 +209,11 @@ def tile_input(spts: np.ndarray, tile: Tile, req: Request, plan, mesh_graph=None
     if cubes:
         core = _cell_keys(spts[tile.start:tile.stop], lo, tile.halo)
         near = np.unique((np.unique(core)[:, None] + _OFFSETS[None, :]).ravel())
-        keep = np.isin(_cell_keys(spts[members], lo, tile.halo), near)
+        # (near is sorted and unique: a binary search per point, no sort of the members)
+        keys = _cell_keys(spts[members], lo, tile.halo)
+        at = np.minimum(np.searchsorted(near, keys), near.shape[0] - 1)
+        keep = near[at] == keys
+        del keys, at
         keep[(members >= tile.start) & (members < tile.stop)] = True
         members = members[keep]
     offset = int(np.searchsorted(members, tile.start))
@@ -294,15 +300,16 @@ class TiledRun:
         n = self.spts.shape[0]
         tree = build_tree(self.spts)
         threshold = self.req.auto_params.get("noise_threshold", 0.01)
+        sample = plan_sample(self.spts)
         self.plan = plan_auto(self.spts, tree, threshold,
-                              self.req.auto_params.get("dense_noise", math.inf))
+                              self.req.auto_params.get("dense_noise", math.inf), sample)
         if self.req.method == "mesh":
             finder = make_finder(self.spts, "mesh", faces=self.s_faces, **self.req.method_params)
             finder._nbtree = tree
             self.mesh_graph = finder.graph(self.req.workers)
         radius = math.nan
         if self.req.method == "auto":
-            radius = (fit_radius(self.spts, tree, self.req.auto_params.get("k", 768))
+            radius = (fit_radius(self.spts, tree, self.req.auto_params.get("k", 768), sample)
                       / math.sqrt(self.plan.dense_share))
         del tree
         self.extent = float(np.linalg.norm(self.spts.max(axis=0) - self.spts.min(axis=0)))

@@ -100,3 +100,22 @@ def test_a_thin_wall_is_not_taken_for_a_dense_cloud():
     assert plan["wide_noise"] > 0.45 and plan["dense"] is None
     rim = cloud.region_mask("rim")
     assert np.median(res.k1[rim]) > 10.0
+
+
+def test_outliers_stay_out_of_the_thinned_fits(dense_sphere, dense_result):
+    # Dense clouds test only the points the hash thins to (AutoRun._dense_stage1): 1 % of the
+    # points replaced by uniform outliers in the bounding box must not drag the fits.
+    rng = np.random.default_rng(4)
+    pts = dense_sphere.points.copy()
+    bad = rng.choice(len(pts), len(pts) // 100, replace=False)
+    pts[bad] = rng.uniform(pts.min(axis=0), pts.max(axis=0), (bad.size, 3))
+    res = curvature.estimate(pts, normals=dense_sphere.normals)
+    assert res.info["plan"]["dense"] is not None
+    inlier = dense_sphere.interior.copy()
+    inlier[bad] = False
+    clean = np.nanmean(np.abs(dense_result.k1 - dense_sphere.k1)[inlier])
+    with_outliers = np.nanmean(np.abs(res.k1 - dense_sphere.k1)[inlier])
+    assert with_outliers < 1.2 * clean
+    tiled = curvature.estimate(pts, normals=dense_sphere.normals, tile_points=15_000)
+    for name, arr in res.fields().items():
+        np.testing.assert_array_equal(tiled.fields()[name], arr, err_msg=name)
