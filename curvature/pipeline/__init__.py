@@ -166,14 +166,15 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
         t0 = time.perf_counter()
         orient(res, req.mode, s_normals, s_vp, graph)
         timings["orientation"] = time.perf_counter() - t0
-    del graph
+    # The Z-ordered copies are not needed past orientation (the result's points are replaced
+    # by the input's): freed before the fields are reordered, when memory peaks.
+    del graph, spts, s_normals, s_vp
+    res.points = None
     release_freed_memory()
     with numba_threads(req.workers):
         res = unpermute(res, inv, pts, tri)
-    res.mean[:] = 0.5 * (res.k1 + res.k2)
-    res.gaussian[:] = res.k1 * res.k2
-    res.uncertain[:] = uncertain(res.k1, res.k2, res.k1_std, res.k2_std, res.neighbor_count,
-                                 res.status, float(np.linalg.norm(np.ptp(pts, axis=0))))
+    del inv
+    derive_fields(res, float(np.linalg.norm(np.ptp(pts, axis=0))))
     timings["total"] = time.perf_counter() - t_start
     res.info = {
         **info, "preset": preset, "orientation": req.mode, "workers": req.workers, "points": n,
@@ -201,6 +202,24 @@ def unpermute(res: CurvatureResult, inv: np.ndarray, pts: np.ndarray, faces) -> 
             fields[name] = take_rows(fields[name], inv)
         setattr(res, name, fields[name])
     return CurvatureResult(points=pts, faces=faces, **fields)
+
+
+# Points per slice of derive_fields (bounds its temporaries at a few MB).
+DERIVE_CHUNK = 1 << 18
+
+
+def derive_fields(res: CurvatureResult, diagonal: float) -> None:
+    """Mean and Gaussian curvature and the ``uncertain`` flag from k1, k2 and their standard
+    errors, in place and in slices (no whole-cloud temporaries at the run's memory peak)."""
+    n = res.k1.shape[0]
+    for start in range(0, n, DERIVE_CHUNK):
+        sl = slice(start, min(start + DERIVE_CHUNK, n))
+        k1, k2 = res.k1[sl], res.k2[sl]
+        np.add(k1, k2, out=res.mean[sl])
+        res.mean[sl] *= 0.5
+        np.multiply(k1, k2, out=res.gaussian[sl])
+        res.uncertain[sl] = uncertain(k1, k2, res.k1_std[sl], res.k2_std[sl],
+                                      res.neighbor_count[sl], res.status[sl], diagonal)
 
 
 def orient(res: CurvatureResult, mode: str, ref_normals, viewpoint, graph) -> None:
