@@ -99,9 +99,16 @@ def compute_block(spts, s_faces, req: Request, query=None, *, progress=None, pla
 
 
 def select_rows(res: CurvatureResult, rows: np.ndarray, points: np.ndarray) -> CurvatureResult:
-    """The result restricted to ``rows``."""
-    return CurvatureResult(points=points, faces=None,
-                           **{name: arr[rows] for name, arr in res.fields().items()})
+    """The result restricted to ``rows``; ``res`` gives up its fields one at a time (at most
+    one field is held twice: a tile's rows are most of its working set). The derived fields
+    are not filled yet, so they are allocated, not copied."""
+    fields = {}
+    for name in list(res.fields()):
+        arr = getattr(res, name)
+        setattr(res, name, None)
+        fields[name] = np.empty(rows.shape[0], arr.dtype) if name in DERIVED else arr[rows]
+        del arr
+    return CurvatureResult(points=points, faces=None, **fields)
 
 
 # Result fields computed from k1 and k2 (and their errors) at the very end (never written
