@@ -529,7 +529,7 @@ class AutoRun:
         # Handed over in a list so that nothing here keeps them once the fits are made.
         stage1 = [field, radius[0]]
         del field, radius
-        self._anchored(res, stage1, reps, owner, kc)
+        self._anchored(res, stage1, reps, owner, kc, rows)
 
     def share_k(self) -> int:
         """``max_share`` of the cloud's points (at least 48)."""
@@ -668,24 +668,43 @@ class AutoRun:
         res.k2_std[:] = std
         res.mean_std[:] = std
 
-    def _anchored(self, res, stage1: list, reps, owner, kc) -> None:
+    def _anchored(self, res, stage1: list, reps, owner, kc, rows=None) -> None:
         """Two passes of anchored normal fits over ``kc`` neighbors of every anchor, read at
-        every point but those that get fits of their own (:meth:`_refit`). ``stage1`` holds
-        the stage-1 normals and their radii (emptied here)."""
-        fits, fit_reach, chosen, err, field_reach = self._model(*stage1, reps, owner, kc)
+        every point (or at ``rows``) but those that get fits of their own (:meth:`_refit`).
+        ``stage1`` holds the stage-1 normals and their radii (emptied here).
+
+        With ``rows`` the second pass fits only the anchors those rows read and the anchors
+        within :data:`REFIT_ZONE` cells of them, which decide whether they are refitted.
+        """
+        n = self.points.shape[0]
+        wanted = None if rows is None else self._zone_anchors(reps, np.unique(owner[rows]))
+        if wanted is not None:  # run() counted a second pass at every anchor
+            self._total -= reps.shape[0] - wanted.shape[0]
+        fits, fit_reach, chosen, err, field_reach = self._model(*stage1, reps, owner, kc,
+                                                                wanted)
+        if wanted is None:
+            rows = np.arange(n, dtype=np.int64)
+        else:  # anchors numbered as the second pass's fits are
+            local = np.full(reps.shape[0], -1, np.int64)
+            local[wanted] = np.arange(wanted.shape[0])
+            owner = local[owner]  # -1 outside the wanted anchors' cells (no row there)
+            reps = reps[wanted]
         zone, zone_reach = self._refit_zone(reps, chosen, fit_reach)
+        in_zone = np.zeros(n, bool)
+        in_zone[rows] = zone[owner[rows]]
         # stage1[0] now holds the refined normals the second pass fitted.
-        own, own_reach = self._refit(res, stage1[0], field_reach, zone[owner], kc)
+        own, own_reach = self._refit(res, stage1[0], field_reach, in_zone, kc)
         # The reads below need only the fits: the normals and their radii, and the tree (72
         # bytes a point together), go before the result pages the reads fill are touched.
         stage1.clear()
-        del field_reach
+        del field_reach, in_zone
         self.tree = None
         release_freed_memory()
         t0 = time.perf_counter()
-        anchored = np.ones(self.points.shape[0], bool)
+        anchored = np.zeros(n, bool)
+        anchored[rows] = True
         anchored[own] = False
-        for sl in self._chunks(self.points.shape[0]):
+        for sl in self._chunks(n):
             query = (sl.start + np.flatnonzero(anchored[sl])).astype(np.int64)
             out = _OutputView(res, query, 1.0 / self.plan.spacing)
             nfr_from_anchors(self.points, query, owner[query], reps, *fits, *out.arrays)
@@ -694,8 +713,18 @@ class AutoRun:
         self.timings["pass2"] += time.perf_counter() - t0
         if self.track_reach:
             # Every point's result depends on whether an anchor of its zone kept a small fit.
-            self.reach = self._point_reach(reps, owner, zone_reach)
+            self.reach = np.full(n, np.nan)
+            d = np.linalg.norm(self.points[rows] - self.points[reps[owner[rows]]], axis=1)
+            self.reach[rows] = d + zone_reach[owner[rows]] + np.sqrt(3.0) * self.plan.cell
             self.reach[own] = np.maximum(self.reach[own], own_reach)
+
+    def _zone_anchors(self, reps, used):
+        """The anchors ``used`` and every anchor within :data:`REFIT_ZONE` cells of one,
+        increasing (indices into ``reps``)."""
+        anchor_pts = self.points[reps]
+        near = cKDTree(anchor_pts).query_ball_point(anchor_pts[used], REFIT_ZONE * self.plan.cell,
+                                                    workers=numba.get_num_threads())
+        return np.unique(np.concatenate([used] + [np.asarray(x, np.int64) for x in near]))
 
     def _refit_zone(self, reps, chosen, fit_reach):
         """Anchors within :data:`REFIT_ZONE` cells of one that kept a fit over at most
