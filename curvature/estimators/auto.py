@@ -51,6 +51,7 @@ import numpy as np
 from numba import njit
 from scipy.spatial import cKDTree
 
+from ..bounds import bounding_box
 from ..fitting import scale_selection
 from ..fitting.kernels import FIT_IMPLICIT, FIT_MONGE, SOLVER_TAUBIN, fit_batch
 from ..fitting.normal_field import (
@@ -284,7 +285,8 @@ def grid_cells(points: np.ndarray, origin: np.ndarray, cell: float,
 
 def coarse_cell(points: np.ndarray, cells: int) -> float:
     """A grid cell that cuts the bounding-box diagonal into ``cells`` (never zero)."""
-    diag = float(np.linalg.norm(points.max(axis=0) - points.min(axis=0)))
+    lo, hi = bounding_box(points)
+    diag = float(np.linalg.norm(hi - lo))
     return diag / cells if diag > 0.0 else 1.0
 
 
@@ -368,7 +370,7 @@ def _relative_median(residuals: np.ndarray, spacing: float) -> float:
 def plan_sample(points: np.ndarray) -> np.ndarray:
     """The plan's geometric subsample: one point per cell of :data:`PLAN_CELLS` across the
     bounding-box diagonal, shape (s,), int64, increasing."""
-    sample, _ = grid_cells(points, points.min(axis=0), coarse_cell(points, PLAN_CELLS))
+    sample, _ = grid_cells(points, bounding_box(points)[0], coarse_cell(points, PLAN_CELLS))
     return sample
 
 
@@ -394,7 +396,7 @@ def plan_auto(points: np.ndarray, tree: tuple, noise_threshold: float,
     -------
     AutoPlan
     """
-    origin = points.min(axis=0)
+    origin = bounding_box(points)[0]
     if sample is None:
         sample = plan_sample(points)
     k = min(PLAN_K, points.shape[0] - 1)

@@ -18,6 +18,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from ..bounds import bounding_box
 from ..cloud import PointCloud
 from ..errors import ParameterError
 from ..estimators.fixed import DEFAULT_CHUNK
@@ -174,7 +175,8 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
     with numba_threads(req.workers):
         res = unpermute(res, inv, pts, tri)
     del inv
-    derive_fields(res, float(np.linalg.norm(np.ptp(pts, axis=0))))
+    lo, hi = bounding_box(pts)
+    derive_fields(res, float(np.linalg.norm(hi - lo)))
     timings["total"] = time.perf_counter() - t_start
     res.info = {
         **info, "preset": preset, "orientation": req.mode, "workers": req.workers, "points": n,

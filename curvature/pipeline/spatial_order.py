@@ -10,10 +10,13 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from ..bounds import bounding_box
+
 BITS = 21  # per axis: 3 * 21 = 63 bits fit an unsigned 64-bit key
 
 
-def _spread_bits(v: np.ndarray) -> np.ndarray:
+@njit(cache=True, inline="always")
+def _spread_bits(v):
     """Insert two zero bits between each of the low 21 bits of ``v`` (uint64)."""
     v = v & np.uint64(0x1FFFFF)
     v = (v | (v << np.uint64(32))) & np.uint64(0x1F00000000FFFF)
@@ -22,6 +25,21 @@ def _spread_bits(v: np.ndarray) -> np.ndarray:
     v = (v | (v << np.uint64(4))) & np.uint64(0x10C30C30C30C30C3)
     v = (v | (v << np.uint64(2))) & np.uint64(0x1249249249249249)
     return v
+
+
+@njit(parallel=True, cache=True)
+def morton_keys(points, lo, scale):
+    """Z-order key of every point, shape (n,), uint64: each coordinate quantized to 21 bits
+    as ``uint64((x - lo) * scale)``, the bits interleaved x, y, z from the lowest."""
+    n = points.shape[0]
+    key = np.empty(n, np.uint64)
+    for i in prange(n):
+        qx = np.uint64((points[i, 0] - lo[0]) * scale)
+        qy = np.uint64((points[i, 1] - lo[1]) * scale)
+        qz = np.uint64((points[i, 2] - lo[2]) * scale)
+        key[i] = _spread_bits(qx) | (_spread_bits(qy) << np.uint64(1)) \
+            | (_spread_bits(qz) << np.uint64(2))
+    return key
 
 
 def morton_order(points: np.ndarray) -> np.ndarray:
@@ -36,13 +54,13 @@ def morton_order(points: np.ndarray) -> np.ndarray:
     ndarray, shape (n,), int64
         ``points[order]`` is in Z-order; equal keys keep their input order (stable sort).
     """
-    lo = points.min(axis=0)
-    span = float(np.max(points.max(axis=0) - lo))
+    if points.shape[0] == 0:
+        return np.arange(0, dtype=np.int64)
+    lo, hi = bounding_box(points)
+    span = float(np.max(hi - lo))
     if not span > 0.0:
         return np.arange(points.shape[0], dtype=np.int64)
-    q = ((points - lo) * ((2**BITS - 1) / span)).astype(np.uint64)
-    key = _spread_bits(q[:, 0]) | (_spread_bits(q[:, 1]) << np.uint64(1)) \
-        | (_spread_bits(q[:, 2]) << np.uint64(2))
+    key = morton_keys(points, lo, (2**BITS - 1) / span)
     return np.argsort(key, kind="stable").astype(np.int64)
 
 

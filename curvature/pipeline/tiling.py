@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..bounds import bounding_box
 from ..estimators.auto import knn_csr, plan_auto, plan_sample
 from ..neighborhoods import make_finder
 from ..neighborhoods.kdtree import build_tree
@@ -153,8 +154,8 @@ def make_tiles(spts: np.ndarray, tile_points: int, halo: float) -> list[Tile]:
     for i, start in enumerate(range(0, n, tile_points)):
         stop = min(start + tile_points, n)
         core = spts[start:stop]
-        tiles.append(Tile(i, start, stop, tuple(core.min(axis=0)), tuple(core.max(axis=0)),
-                          halo))
+        lo, hi = bounding_box(core)
+        tiles.append(Tile(i, start, stop, tuple(lo), tuple(hi), halo))
     return tiles
 
 
@@ -312,7 +313,8 @@ class TiledRun:
             radius = (fit_radius(self.spts, tree, self.req.auto_params.get("k", 768), sample)
                       / math.sqrt(self.plan.dense_share))
         del tree
-        self.extent = float(np.linalg.norm(self.spts.max(axis=0) - self.spts.min(axis=0)))
+        lo, hi = bounding_box(self.spts)
+        self.extent = float(np.linalg.norm(hi - lo))
         self.tiles = make_tiles(self.spts, self.tile_points,
                                 halo_guess(self.req, self.plan.spacing, radius))
         self.result = empty_result(self.spts, self.s_faces)

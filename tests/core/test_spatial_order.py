@@ -1,6 +1,7 @@
 """Z-order permutation used by the pipeline for memory locality."""
 
 import numpy as np
+import pytest
 
 from curvature.pipeline.spatial_order import inverse_permutation, morton_order
 
@@ -33,3 +34,17 @@ def test_inverse_permutation():
     inv = inverse_permutation(order)
     np.testing.assert_array_equal(order[inv], np.arange(100))
     np.testing.assert_array_equal(inv[order], np.arange(100))
+
+
+def test_bounding_box_is_numpys_min_and_max():
+    from curvature.bounds import BOX_BLOCK, bounding_box
+
+    for n in (1, 7, BOX_BLOCK, BOX_BLOCK + 1, 3 * BOX_BLOCK + 5):
+        pts = np.random.default_rng(n).normal(size=(n, 3)) * [1.0, 1e-3, 1e3]
+        lo, hi = bounding_box(pts)
+        np.testing.assert_array_equal(lo, pts.min(axis=0))
+        np.testing.assert_array_equal(hi, pts.max(axis=0))
+        lo, hi = bounding_box(np.asfortranarray(pts[::-1]))  # any layout
+        np.testing.assert_array_equal(lo, pts.min(axis=0))
+    with pytest.raises(ValueError):
+        bounding_box(np.empty((0, 3)))
