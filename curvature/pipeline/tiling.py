@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..bounds import bounding_box
+from ..bounds import bounding_box, inside_box
 from ..estimators.auto import knn_csr, plan_auto, plan_sample
 from ..neighborhoods import make_finder
 from ..neighborhoods.kdtree import build_tree
@@ -203,7 +203,7 @@ def tile_input(spts: np.ndarray, tile: Tile, req: Request, plan, mesh_graph=None
     separate regions, whose common box would hold far more than their surroundings.
     """
     lo, hi, cubes = _halo_box(tile)
-    inside = np.all((spts >= lo) & (spts <= hi), axis=1)
+    inside = inside_box(spts, lo, hi)
     inside[tile.start:tile.stop] = True
     members = np.flatnonzero(inside).astype(np.int64)
     del inside

@@ -48,3 +48,15 @@ def test_bounding_box_is_numpys_min_and_max():
         np.testing.assert_array_equal(lo, pts.min(axis=0))
     with pytest.raises(ValueError):
         bounding_box(np.empty((0, 3)))
+
+
+def test_inside_box_is_the_closed_box():
+    from curvature.bounds import inside_box
+
+    pts = np.random.default_rng(3).normal(size=(50_000, 3))
+    pts[:3] = [[0.5, 0.0, 0.0], [-0.5, 0.3, 2.0], [0.5000001, 0.0, 0.0]]  # on faces, just out
+    lo, hi = np.array([-0.5, -1.0, -0.2]), np.array([0.5, 0.3, 2.0])
+    got = inside_box(pts, lo, hi)
+    np.testing.assert_array_equal(got, np.all((pts >= lo) & (pts <= hi), axis=1))
+    assert got[:3].tolist() == [True, True, False]
+    assert inside_box(pts, np.full(3, -np.inf), np.full(3, np.inf)).all()
