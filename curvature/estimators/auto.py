@@ -369,9 +369,39 @@ def _relative_median(residuals: np.ndarray, spacing: float) -> float:
 
 def plan_sample(points: np.ndarray) -> np.ndarray:
     """The plan's geometric subsample: one point per cell of :data:`PLAN_CELLS` across the
-    bounding-box diagonal, shape (s,), int64, increasing."""
-    sample, _ = grid_cells(points, bounding_box(points)[0], coarse_cell(points, PLAN_CELLS))
-    return sample
+    bounding-box diagonal, shape (s,), int64, increasing (:func:`grid_cells`' representatives,
+    found on a dense array of the few coarse cells instead of a sort of every point's key)."""
+    # (a cell of 1/PLAN_CELLS of the diagonal: at most PLAN_CELLS + 1 cells an axis)
+    return np.sort(_dense_representatives(points, bounding_box(points)[0],
+                                          coarse_cell(points, PLAN_CELLS)))
+
+
+@njit(cache=True)
+def _dense_representatives(points, origin, cell):
+    """:func:`_cell_representatives` of every occupied cell (nothing avoided), over a dense
+    array of all the grid's cells (for coarse grids only)."""
+    n = points.shape[0]
+    dims = np.zeros(3, np.int64)
+    for i in range(n):
+        for t in range(3):
+            dims[t] = max(dims[t], cell_ijk(points[i, t], origin, cell, t) + 1)
+    best = np.full(dims[0] * dims[1] * dims[2], -1, np.int64)
+    best_d = np.empty(best.shape[0])
+    for i in range(n):
+        c = 0
+        d = 0.0
+        for t in range(3):
+            ijk = cell_ijk(points[i, t], origin, cell, t)
+            c = c * dims[t] + ijk
+            center = origin[t] + (ijk + 0.5) * cell
+            d += (points[i, t] - center) ** 2
+        b = best[c]
+        if b < 0 or d < best_d[c] or (d == best_d[c] and (
+                points[i, 0], points[i, 1], points[i, 2]) < (points[b, 0], points[b, 1],
+                                                             points[b, 2])):
+            best[c] = i
+            best_d[c] = d
+    return best[best >= 0]
 
 
 def plan_auto(points: np.ndarray, tree: tuple, noise_threshold: float,

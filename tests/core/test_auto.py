@@ -285,3 +285,13 @@ def test_coordinates_spread_over_hundreds_of_orders_of_magnitude_do_not_raise():
     assert len(res.status) == 28 and not res.info["plan"]["clean"]
     ok = res.status == 0
     assert np.isfinite(res.k1[ok]).all() and np.isnan(res.k1[~ok]).all()
+
+
+def test_plan_sample_is_the_coarse_grids_representatives():
+    from curvature.estimators.auto import PLAN_CELLS, coarse_cell, grid_cells, plan_sample
+
+    grid = np.stack(np.meshgrid(np.arange(10.0), np.arange(10.0), [0.0]), -1).reshape(-1, 3)
+    for pts in (synthetic.make("torus", 50_000, noise=0.1, seed=2).points,
+                synthetic.filleted_box(noise=0.05, seed=1).points, grid):  # grid: ties
+        ref, _ = grid_cells(pts, pts.min(axis=0), coarse_cell(pts, PLAN_CELLS))
+        np.testing.assert_array_equal(plan_sample(pts), ref)
