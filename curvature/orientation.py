@@ -99,7 +99,7 @@ def reverse_edges(graph, valid):
     """CSR lists of the points naming each point as a neighbor (the graph's other direction),
     without the points it names itself: those edges are in its own row already.
 
-    Most neighbor relations are mutual, so the lists hold about a quarter of the graph's
+    Most neighbor relations are mutual, so the lists hold about a fifth of the graph's
     edges instead of all of them (25 bytes a point less at the orientation, where a big
     run's memory peaks); the forest is the same (a repeated edge never lowers a key).
 

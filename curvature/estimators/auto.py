@@ -518,8 +518,10 @@ class AutoRun:
         """Fill every output array of ``res`` and the orientation graph (n, orient_k).
 
         ``rows`` (increasing int64 indices), if given, are the only points whose results are
-        wanted (a tile's own points): dense clouds then skip the other points' results and
-        their stage-1 work; other clouds compute every row.
+        wanted (a tile's own points); the other rows of ``res`` and ``graph`` are left
+        unfilled. Dense clouds then skip the other points' stage-1 work, and dense and noisy
+        clouds the second pass, refits and reads that only other points need; clean clouds
+        compute every row.
         """
         n = self.points.shape[0]
         k_stage1 = min(max(self.params["normal_k"], PLAN_K, orient_k), n - 1)

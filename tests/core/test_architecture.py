@@ -24,7 +24,7 @@ ARCHITECTURE_DOC = PACKAGE.parent / "docs" / "architecture.md"
 LAYERS = {
     "base": ("errors", "status", "params", "validation", "cloud", "result", "field_info",
              "progress", "memory"),
-    "kernels": ("neighborhoods", "fitting", "orientation", "uncertainty"),
+    "kernels": ("neighborhoods", "fitting", "orientation", "uncertainty", "bounds"),
     "estimators": ("estimators",),
     "pipeline": ("pipeline",),
     "files": ("io", "preview"),
