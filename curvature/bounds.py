@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-__all__ = ["BOX_BLOCK", "bounding_box", "inside_box"]
+__all__ = ["BOX_BLOCK", "bounding_box", "diagonal", "inside_box"]
 
 # Points per block of bounding_box's parallel pass.
 BOX_BLOCK = 1 << 16
@@ -27,6 +27,12 @@ def bounding_box(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if points.shape[0] == 0:
         raise ValueError("bounding_box: no points")
     return _bounding_box(np.ascontiguousarray(points, dtype=np.float64))
+
+
+def diagonal(points: np.ndarray) -> float:
+    """Length of the bounding box's diagonal of ``points`` (n, 3), n >= 1."""
+    lo, hi = bounding_box(points)
+    return float(np.linalg.norm(hi - lo))
 
 
 @njit(parallel=True, cache=True)

@@ -51,7 +51,7 @@ import numpy as np
 from numba import njit
 from scipy.spatial import cKDTree
 
-from ..bounds import bounding_box
+from ..bounds import bounding_box, diagonal
 from ..fitting import scale_selection
 from ..fitting.kernels import FIT_IMPLICIT, FIT_MONGE, SOLVER_TAUBIN, fit_batch
 from ..fitting.normal_field import (
@@ -285,8 +285,7 @@ def grid_cells(points: np.ndarray, origin: np.ndarray, cell: float,
 
 def coarse_cell(points: np.ndarray, cells: int) -> float:
     """A grid cell that cuts the bounding-box diagonal into ``cells`` (never zero)."""
-    lo, hi = bounding_box(points)
-    diag = float(np.linalg.norm(hi - lo))
+    diag = diagonal(points)
     return diag / cells if diag > 0.0 else 1.0
 
 

@@ -18,7 +18,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from ..bounds import bounding_box
+from ..bounds import diagonal
 from ..cloud import PointCloud
 from ..errors import ParameterError
 from ..estimators.fixed import DEFAULT_CHUNK
@@ -175,8 +175,7 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
     with numba_threads(req.workers):
         res = unpermute(res, inv, pts, tri)
     del inv
-    lo, hi = bounding_box(pts)
-    derive_fields(res, float(np.linalg.norm(hi - lo)))
+    derive_fields(res, diagonal(pts))
     timings["total"] = time.perf_counter() - t_start
     res.info = {
         **info, "preset": preset, "orientation": req.mode, "workers": req.workers, "points": n,

@@ -54,8 +54,6 @@ def morton_order(points: np.ndarray) -> np.ndarray:
     ndarray, shape (n,), int64
         ``points[order]`` is in Z-order; equal keys keep their input order (stable sort).
     """
-    if points.shape[0] == 0:
-        return np.arange(0, dtype=np.int64)
     lo, hi = bounding_box(points)
     span = float(np.max(hi - lo))
     if not span > 0.0:

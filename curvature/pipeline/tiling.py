@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..bounds import bounding_box, inside_box
+from ..bounds import bounding_box, diagonal, inside_box
 from ..estimators.auto import knn_csr, plan_auto, plan_sample
 from ..neighborhoods import make_finder
 from ..neighborhoods.kdtree import build_tree
@@ -313,8 +313,7 @@ class TiledRun:
             radius = (fit_radius(self.spts, tree, self.req.auto_params.get("k", 768), sample)
                       / math.sqrt(self.plan.dense_share))
         del tree
-        lo, hi = bounding_box(self.spts)
-        self.extent = float(np.linalg.norm(hi - lo))
+        self.extent = diagonal(self.spts)
         self.tiles = make_tiles(self.spts, self.tile_points,
                                 halo_guess(self.req, self.plan.spacing, radius))
         self.result = empty_result(self.spts, self.s_faces)
