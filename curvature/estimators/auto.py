@@ -475,6 +475,90 @@ def plan_auto(points: np.ndarray, tree: tuple, noise_threshold: float,
     return replace(plan, dense_share=float(share), dense=replace(dense, clean=False))
 
 
+def thinned_points(points: np.ndarray, share: float) -> np.ndarray:
+    """Indices (increasing, int64) of the points a dense cloud's fits see
+    (:func:`~.sampling.thinned`)."""
+    keep = np.ones(points.shape[0], bool)
+    thinned(points, share, keep)
+    return np.flatnonzero(keep).astype(np.int64)
+
+
+def dense_normal_k(requested: int, share: float, normal_k: int, n: int) -> int:
+    """Neighbors of the stage-1 normals of a dense cloud thinned to ``share``: ``requested /
+    share``, at least ``normal_k``, at most :data:`DENSE_NORMAL_K` and ``n - 1``."""
+    return min(max(int(round(requested / share)), normal_k), DENSE_NORMAL_K, n - 1)
+
+
+def dense_stage1(points, tree, cand, spacing: float, k: int, normal_k: int, chunk_size: int,
+                 tick=None):
+    """Stage-1 normals and outlier tests of a dense cloud's thinned points, from one query.
+
+    Only the thinned points are fitted and the outlier tests only decide which of them are,
+    so no other point needs them. The first ``normal_k`` of a point's ``k`` neighbors are the
+    ones a ``normal_k`` query gives (ties break by index), so the tests are those of the other
+    branches. A function of the whole cloud at each point: a tiled run computes it once for
+    all tiles (:class:`~curvature.pipeline.tiling.TiledRun`), with the same values as a
+    run over the whole cloud.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+    tree : tuple
+        :func:`~curvature.neighborhoods.kdtree.build_tree` over ``points``.
+    cand : ndarray, shape (m,), int64
+        The thinned points (:func:`thinned_points`).
+    spacing : float
+        The plan's spacing (outlier test).
+    k, normal_k : int
+        Neighbors of the normals (:func:`dense_normal_k`) and of the outlier tests.
+    chunk_size : int
+        Points of a 24-neighbor chunk; chunks hold as many neighbor entries.
+    tick : callable, optional
+        Called with the count of points done after each chunk.
+
+    Returns
+    -------
+    cand : ndarray, shape (m,), int64
+    field : ndarray, shape (m, 3)
+        PCA normals over ``k`` neighbors.
+    r_normal : ndarray, shape (m,)
+        Distance to the ``k``-th neighbor.
+    outlier : ndarray, shape (m,), bool
+    """
+    m = cand.shape[0]
+    kiso = min(ISOLATION_K, k)
+    field, r_normal = np.empty((m, 3)), np.empty(m)
+    r_isolation, outlier = np.empty(m), np.zeros(m, bool)
+    own = np.empty((m, 3))  # each point's normal over its normal_k neighbors
+    step = max(64, chunk_size * 24 // k)  # neighbor entries of a 24-neighbor chunk
+    for sl in (slice(i, min(i + step, m)) for i in range(0, m, step)):
+        query = cand[sl]
+        indptr, indices, d2 = knn_csr(points, tree, query, k)
+        nbr = indices.reshape(-1, k)
+        r_normal[sl] = np.sqrt(d2[:, -1])
+        r_isolation[sl] = np.sqrt(d2[:, kiso - 1])
+        pca_normals(points, query, indptr, indices, field[sl])
+        pca_normals(points, query, *_prefix_csr(nbr, normal_k), own[sl])
+        off_surface(points, query, np.ascontiguousarray(nbr[:, :normal_k]), own[sl], spacing,
+                    outlier[sl])
+        if tick is not None:
+            tick(sl.stop - sl.start)
+    del own
+    isolated(points, tree, r_isolation, outlier, rows=cand)
+    return cand, field, r_normal, outlier
+
+
+def whole_dense_stage1(points, tree, plan: AutoPlan, params: dict, chunk_size: int,
+                       tick=None) -> tuple:
+    """:func:`dense_stage1` of a whole dense cloud, as :meth:`AutoRun.run` makes it (for a
+    tiled run to share among its tiles)."""
+    n = points.shape[0]
+    normal_k = min(params["normal_k"], n - 1)
+    cand = thinned_points(points, plan.dense_share)
+    k = dense_normal_k(params["normal_k"], plan.dense_share, normal_k, n)
+    return dense_stage1(points, tree, cand, plan.spacing, k, normal_k, chunk_size, tick)
+
+
 class AutoRun:
     """One run of the auto estimator over a (Z-ordered) cloud, filling a result in place.
 
@@ -502,7 +586,7 @@ class AutoRun:
         self.chunk_size = chunk_size
         self.progress = progress
         t0 = time.perf_counter()
-        self.tree = build_tree(points)
+        self._tree = None
         self.plan = plan_auto(points, self.tree, params["noise_threshold"],
                               params["dense_noise"]) if plan is None else plan
         self.timings: dict[str, float] = {"plan": time.perf_counter() - t0}
@@ -513,22 +597,38 @@ class AutoRun:
         # RMS neighbor distance of each clean fit (its standard error's unit)
         self.clean_h = np.empty(points.shape[0]) if self.plan.clean else None
 
-    def run(self, res, graph, orient_k: int, rows: np.ndarray | None = None) -> None:
+    @property
+    def tree(self) -> tuple:
+        """The k-d tree over the points, built at first use: a tile of a dense cloud whose
+        stage-1 work was done for the whole cloud needs none."""
+        if self._tree is None:
+            self._tree = build_tree(self.points)
+        return self._tree
+
+    @tree.setter
+    def tree(self, value) -> None:
+        self._tree = value
+
+    def run(self, res, graph, orient_k: int, rows: np.ndarray | None = None,
+            dense_stage1: tuple | None = None) -> None:
         """Fill every output array of ``res`` and the orientation graph (n, orient_k).
 
         ``rows`` (increasing int64 indices), if given, are the only points whose results are
         wanted (a tile's own points); the other rows of ``res`` and ``graph`` are left
         unfilled. Dense clouds then skip the other points' stage-1 work, and dense and noisy
         clouds the second pass, refits and reads that only other points need; clean clouds
-        compute every row.
+        compute every row. ``dense_stage1`` (dense clouds only): the output of
+        :func:`dense_stage1` for these points, computed beforehand (indices into them).
         """
         n = self.points.shape[0]
         k_stage1 = min(max(self.params["normal_k"], PLAN_K, orient_k), n - 1)
         kc = min(self.fit_k(), n - 1)
         self._done = 0
+        if dense_stage1 is not None and self.plan.dense is None:
+            raise ValueError("dense_stage1 is given but the plan is not dense")
         if self.plan.dense is not None:
             self._dense(res, graph, np.arange(n, dtype=np.int64) if rows is None else rows,
-                        min(self.params["normal_k"], k_stage1))
+                        min(self.params["normal_k"], k_stage1), dense_stage1)
             return
         self._total = 2 * n
         t0 = time.perf_counter()
@@ -563,6 +663,12 @@ class AutoRun:
         stage1 = [field, radius[0]]
         del field, radius
         self._anchored(res, stage1, reps, owner, kc, rows)
+
+    def dense_normal_k(self, normal_k: int) -> int:
+        """Neighbors of a dense cloud's stage-1 normals: as many of the whole cloud's points as
+        the thinned share leaves out (``normal_k / share``), at least ``normal_k``."""
+        return dense_normal_k(self.params["normal_k"], self.plan.dense_share, normal_k,
+                              self.points.shape[0])
 
     def share_k(self) -> int:
         """``max_share`` of the cloud's points (at least 48)."""
@@ -854,7 +960,7 @@ class AutoRun:
         self.timings["refit"] = time.perf_counter() - t0
         return own[done], (reach[done] if reach is not None else None)
 
-    def _dense(self, res, graph, rows, normal_k: int) -> None:
+    def _dense(self, res, graph, rows, normal_k: int, given=None) -> None:
         """Fits on a thinned share of a dense noisy cloud (``plan.dense``), read at ``rows``.
 
         The thinned points run the noisy branch as a cloud of their own, with stage-1 normals
@@ -865,7 +971,7 @@ class AutoRun:
         n = self.points.shape[0]
         share = self.plan.dense_share
         t0 = time.perf_counter()
-        idx, field, r_normal = self._dense_stage1(graph, rows, normal_k)
+        idx, field, r_normal = self._dense_stage1(graph, rows, normal_k, given)
         self.timings["stage1"] = time.perf_counter() - t0
         sub = np.ascontiguousarray(self.points[idx])
         ns = idx.shape[0]
@@ -911,15 +1017,10 @@ class AutoRun:
             d = np.linalg.norm(self.points[rows] - sub[reps[anchor_of]], axis=1)
             self.reach[rows] = 2.0 * d + fit_reach[anchor_of] + np.sqrt(3.0) * inner.plan.cell
 
-    def _dense_stage1(self, graph, rows, normal_k: int):
-        """The stage-1 work of a dense cloud: orientation graph rows at ``rows``; at the
-        points the hash thins to (:func:`~.sampling.thinned`), the outlier tests and the
-        normals over the whole cloud's ``normal_k / share`` neighbors, all from one query.
-
-        Only the thinned points are fitted and the outlier tests only decide which of them
-        are, so no other point needs them; the first ``normal_k`` of a point's neighbors
-        are the ones a ``normal_k`` query gives (ties break by index), so the tests are
-        those of the other branches.
+    def _dense_stage1(self, graph, rows, normal_k: int, given=None):
+        """The stage-1 work of a dense cloud: orientation graph rows at ``rows`` and, unless
+        ``given`` (a tile's share of the whole cloud's :func:`dense_stage1`), the thinned
+        points' normals and outlier tests (:func:`dense_stage1`).
 
         Returns
         -------
@@ -928,39 +1029,20 @@ class AutoRun:
         field, r_normal : ndarray, shapes (s, 3) and (s,)
             Their normals and the distance to the last neighbor behind each.
         """
-        n = self.points.shape[0]
-        share = self.plan.dense_share
-        cand = np.ones(n, bool)
-        thinned(self.points, share, cand)
-        cand = np.flatnonzero(cand).astype(np.int64)
-        m = cand.shape[0]
-        self._total = (2 if graph is not None else 1) * rows.shape[0] + m
+        self._total = (2 if graph is not None else 1) * rows.shape[0]
         if graph is not None:
             kg = graph.shape[1]
             for sl in self._chunks(rows.shape[0]):
                 _, indices, _ = knn_csr(self.points, self.tree, rows[sl], kg)
                 graph[rows[sl]] = indices.reshape(-1, kg)
                 self._tick(sl.stop - sl.start)
-        k = min(max(int(round(self.params["normal_k"] / share)), normal_k), DENSE_NORMAL_K,
-                n - 1)
-        kiso = min(ISOLATION_K, k)
-        field, r_normal = np.empty((m, 3)), np.empty(m)
-        r_isolation, outlier = np.empty(m), np.zeros(m, bool)
-        own = np.empty((m, 3))  # each point's normal over its normal_k neighbors
-        step = max(64, self.chunk_size * 24 // k)  # neighbor entries of a 24-neighbor chunk
-        for sl in (slice(i, min(i + step, m)) for i in range(0, m, step)):
-            query = cand[sl]
-            indptr, indices, d2 = knn_csr(self.points, self.tree, query, k)
-            nbr = indices.reshape(-1, k)
-            r_normal[sl] = np.sqrt(d2[:, -1])
-            r_isolation[sl] = np.sqrt(d2[:, kiso - 1])
-            pca_normals(self.points, query, indptr, indices, field[sl])
-            pca_normals(self.points, query, *_prefix_csr(nbr, normal_k), own[sl])
-            off_surface(self.points, query, np.ascontiguousarray(nbr[:, :normal_k]), own[sl],
-                        self.plan.spacing, outlier[sl])
-            self._tick(sl.stop - sl.start)
-        del own
-        isolated(self.points, self.tree, r_isolation, outlier, rows=cand)
+        if given is None:
+            cand = thinned_points(self.points, self.plan.dense_share)
+            self._total += cand.shape[0]
+            given = dense_stage1(self.points, self.tree, cand, self.plan.spacing,
+                                 self.dense_normal_k(normal_k), normal_k, self.chunk_size,
+                                 self._tick)
+        cand, field, r_normal, outlier = given
         self.outliers[cand[outlier]] = True
         keep = ~outlier
         return cand[keep], field[keep], r_normal[keep]

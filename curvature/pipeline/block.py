@@ -41,7 +41,7 @@ class Block:
 
 
 def compute_block(spts, s_faces, req: Request, query=None, *, progress=None, plan=None,
-                  mesh_graph=None, track_reach: bool = False) -> Block:
+                  mesh_graph=None, track_reach: bool = False, dense_stage1=None) -> Block:
     """Unoriented curvature of ``query`` points of a Z-ordered block of points.
 
     Parameters
@@ -60,20 +60,26 @@ def compute_block(spts, s_faces, req: Request, query=None, *, progress=None, pla
         The whole cloud's vertex graph restricted to the block, for method "mesh".
     track_reach : bool
         Also return each query point's reach (see :class:`Block`).
+    dense_stage1 : tuple, optional
+        Method "auto" on a dense cloud: the whole cloud's
+        :func:`~curvature.estimators.auto.dense_stage1` restricted to the block (block
+        indices), so that a tile does not compute it again for its halo. The block then
+        makes no orientation graph (the tiled run makes it for the whole cloud), and need
+        hold only the thinned points besides ``query``.
     """
     n = spts.shape[0]
     # Every point, in order, unless told otherwise (the default estimator then holds no
     # index array through its run).
     whole = query is None or (len(query) == n and np.array_equal(query, np.arange(n)))
     query = np.asarray(query, np.int64) if query is not None else None
-    want_graph = req.mode == "auto"
+    want_graph = req.mode == "auto" and dense_stage1 is None
     timings: dict = {}
     if req.method == "auto":
         res = empty_result(spts, s_faces)
         graph = np.empty((n, ORIENT_K), np.int32) if want_graph else None
         run = AutoRun(spts, req.auto_params, req.chunk_size, progress, plan=plan,
                       track_reach=track_reach)
-        run.run(res, graph, ORIENT_K, None if whole else query)
+        run.run(res, graph, ORIENT_K, None if whole else query, dense_stage1)
         timings.update(run.timings)
         info = {"method": "auto", "params": req.auto_params,
                 "fit": "implicit" if run.plan.clean else "nfr", "plan": run.plan.to_dict()}

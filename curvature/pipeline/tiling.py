@@ -30,9 +30,10 @@ from collections import deque
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit, prange
 
 from ..bounds import bounding_box, diagonal, inside_box
-from ..estimators.auto import knn_csr, plan_auto, plan_sample
+from ..estimators.auto import knn_csr, plan_auto, plan_sample, whole_dense_stage1
 from ..neighborhoods import make_finder
 from ..neighborhoods.kdtree import build_tree
 from ..orientation import ORIENT_K
@@ -88,6 +89,9 @@ class TileInput:
     plan : AutoPlan
     mesh_graph : tuple of ndarray or None
         The cloud's vertex graph restricted to ``members`` (method "mesh").
+    dense_stage1 : tuple of ndarray or None
+        The whole cloud's :func:`~curvature.estimators.auto.dense_stage1` at the thinned
+        ``members`` (indices into ``points``; method "auto" on a dense cloud).
     """
 
     tile: Tile
@@ -97,6 +101,7 @@ class TileInput:
     request: Request
     plan: object
     mesh_graph: tuple | None = None
+    dense_stage1: tuple | None = None
 
 
 @dataclass
@@ -137,6 +142,24 @@ def halo_guess(req: Request, spacing: float, fit_radius: float = math.nan) -> fl
     return HALO_MARGIN * reach
 
 
+def orientation_graph(spts: np.ndarray, tree: tuple, graph: np.ndarray,
+                      chunk_size: int) -> None:
+    """Each point's ``graph.shape[1]`` nearest neighbors (themselves first), in place.
+
+    Parameters
+    ----------
+    spts : ndarray, shape (n, 3)
+    tree : tuple
+        :func:`~curvature.neighborhoods.kdtree.build_tree` over ``spts``.
+    graph : ndarray, shape (n, g), int32
+    chunk_size : int
+    """
+    n, k = graph.shape
+    for start in range(0, n, chunk_size):
+        rows = np.arange(start, min(start + chunk_size, n), dtype=np.int64)
+        graph[rows] = knn_csr(spts, tree, rows, k)[1].reshape(-1, k)
+
+
 def fit_radius(spts: np.ndarray, tree: tuple, k: int, sample: np.ndarray | None = None) -> float:
     """Median distance to the ``k``-th neighbor over the plan's geometric sample
     (:func:`~curvature.estimators.auto.plan_sample`, computed if not given)."""
@@ -175,10 +198,17 @@ def restrict_graph(graph: tuple, members: np.ndarray, n: int) -> tuple:
     return out_ptr, cols.astype(np.int64)
 
 
-def _cell_keys(points: np.ndarray, origin: np.ndarray, size: float) -> np.ndarray:
-    """One int64 per point naming its cube of side ``size`` (21 bits per axis)."""
-    c = np.floor((points - origin) / size).astype(np.int64) + 1  # >= 0 past the dilation
-    return (c[:, 0] << 42) | (c[:, 1] << 21) | c[:, 2]
+@njit(parallel=True, cache=True)
+def _cell_keys(points, rows, origin, size):
+    """One int64 per point ``points[rows]`` naming its cube of side ``size`` (21 bits per
+    axis), shape (len(rows),)."""
+    keys = np.empty(rows.shape[0], np.int64)
+    for t in prange(rows.shape[0]):
+        key = 0
+        for a in range(3):  # (+ 1: >= 0 past the dilation)
+            key = (key << 21) | (int(np.floor((points[rows[t], a] - origin[a]) / size)) + 1)
+        keys[t] = key
+    return keys
 
 
 _OFFSETS = np.array([(dx << 42) + (dy << 21) + dz for dx in (-1, 0, 1) for dy in (-1, 0, 1)
@@ -195,23 +225,34 @@ def _halo_box(tile: Tile) -> tuple[np.ndarray, np.ndarray, bool]:
     return lo, hi, cubes
 
 
-def tile_input(spts: np.ndarray, tile: Tile, req: Request, plan, mesh_graph=None) -> TileInput:
+def tile_input(spts: np.ndarray, tile: Tile, req: Request, plan, mesh_graph=None,
+               dense_stage1=None) -> TileInput:
     """The points of ``tile`` plus its halo, ready for :func:`compute_tile`.
 
     The halo is every point within ``tile.halo`` of the tile's box that also lies in a cube
     of side ``tile.halo`` next to a cube holding a tile point: a Z-order run can span two
     separate regions, whose common box would hold far more than their surroundings.
+    With ``dense_stage1``, the whole cloud's (cloud indices), the halo holds only the points
+    it was made for (the thinned points: nothing else of the halo is read), and it is
+    restricted to the members.
     """
     lo, hi, cubes = _halo_box(tile)
     inside = inside_box(spts, lo, hi)
     inside[tile.start:tile.stop] = True
     members = np.flatnonzero(inside).astype(np.int64)
     del inside
+    if dense_stage1 is not None:
+        thinned = dense_stage1[0]
+        at = np.minimum(np.searchsorted(thinned, members), thinned.shape[0] - 1)
+        members = members[(thinned[at] == members)
+                          | ((members >= tile.start) & (members < tile.stop))]
+        del at
     if cubes:
-        core = _cell_keys(spts[tile.start:tile.stop], lo, tile.halo)
+        core = _cell_keys(spts, np.arange(tile.start, tile.stop, dtype=np.int64), lo,
+                          tile.halo)
         near = np.unique((np.unique(core)[:, None] + _OFFSETS[None, :]).ravel())
         # (near is sorted and unique: a binary search per point, no sort of the members)
-        keys = _cell_keys(spts[members], lo, tile.halo)
+        keys = _cell_keys(spts, members, lo, tile.halo)
         at = np.minimum(np.searchsorted(near, keys), near.shape[0] - 1)
         keep = near[at] == keys
         del keys, at
@@ -220,8 +261,19 @@ def tile_input(spts: np.ndarray, tile: Tile, req: Request, plan, mesh_graph=None
     offset = int(np.searchsorted(members, tile.start))
     query = np.arange(offset, offset + tile.stop - tile.start, dtype=np.int64)
     graph = None if mesh_graph is None else restrict_graph(mesh_graph, members, spts.shape[0])
+    if dense_stage1 is not None:
+        dense_stage1 = restrict_rows(dense_stage1, members)
     return TileInput(tile, np.ascontiguousarray(spts[members]), members, query, req, plan,
-                     graph)
+                     graph, dense_stage1)
+
+
+def restrict_rows(rows: tuple, members: np.ndarray) -> tuple:
+    """Per-point arrays ``(index, *values)`` of some points of the cloud (index increasing)
+    restricted to ``members`` (increasing), their index renumbered into ``members``."""
+    index = rows[0]
+    at = np.minimum(np.searchsorted(members, index), members.shape[0] - 1)
+    keep = np.flatnonzero(members[at] == index)
+    return (at[keep], *(values[keep] for values in rows[1:]))
 
 
 def halo_room(core: np.ndarray, tile: Tile) -> np.ndarray:
@@ -250,7 +302,8 @@ def compute_tile(inp: TileInput, progress=None) -> TileOutput:
     step = None if progress is None else (lambda done, total: progress(done / max(total, 1)))
     with numba_threads(inp.request.workers):
         block = compute_block(inp.points, None, inp.request, inp.query, progress=step,
-                              plan=inp.plan, mesh_graph=inp.mesh_graph, track_reach=True)
+                              plan=inp.plan, mesh_graph=inp.mesh_graph, track_reach=True,
+                              dense_stage1=inp.dense_stage1)
     room = halo_room(inp.points[inp.query], inp.tile)
     whole = inp.tile.halo == math.inf  # every point of the cloud is in the tile
     # a point must see strictly past its reach (NaN reach counts as short)
@@ -312,18 +365,30 @@ class TiledRun:
         if self.req.method == "auto":
             radius = (fit_radius(self.spts, tree, self.req.auto_params.get("k", 768), sample)
                       / math.sqrt(self.plan.dense_share))
+        self.graph = np.empty((n, ORIENT_K), np.int32) if self.req.mode == "auto" else None
+        self.dense_stage1 = None
+        if self.req.method == "auto" and self.plan.dense is not None:
+            # Once for the whole cloud: every tile would compute it again for its halo,
+            # which holds 2 to 3 times the tile's points (10M-point torus, tiles of 1M).
+            # Its tiles then need no other halo point, and so no tree of their own for
+            # the orientation graph: that is made here too.
+            self.dense_stage1 = whole_dense_stage1(self.spts, tree, self.plan,
+                                                   self.req.auto_params,
+                                                   self.req.chunk_size)
+            if self.graph is not None:
+                orientation_graph(self.spts, tree, self.graph, self.req.chunk_size)
         del tree
         self.extent = diagonal(self.spts)
         self.tiles = make_tiles(self.spts, self.tile_points,
                                 halo_guess(self.req, self.plan.spacing, radius))
         self.result = empty_result(self.spts, self.s_faces)
-        self.graph = np.empty((n, ORIENT_K), np.int32) if self.req.mode == "auto" else None
         self.info: dict = {}
         self.seconds = 0.0
         self.done = 0
 
     def input(self, tile: Tile) -> TileInput:
-        return tile_input(self.spts, tile, self.req, self.plan, self.mesh_graph)
+        return tile_input(self.spts, tile, self.req, self.plan, self.mesh_graph,
+                          self.dense_stage1)
 
     def accept(self, out: TileOutput) -> Tile | None:
         """Store a tile's rows, or return the tile with a wider halo to compute again."""
@@ -334,7 +399,7 @@ class TiledRun:
         for name, arr in out.fields.items():
             if name not in DERIVED:
                 getattr(self.result, name)[sl] = arr
-        if self.graph is not None:
+        if out.graph is not None:  # (dense clouds: made for the whole cloud)
             self.graph[sl] = out.graph
         self.tiles[out.tile.index] = out.tile
         self.info = out.info

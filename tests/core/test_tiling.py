@@ -242,3 +242,34 @@ def test_local_tiled_progress_moves_inside_tiles_and_never_back(torus, monkeypat
     dones = [d for d, _ in seen]
     assert dones == sorted(dones) and dones[-1] == len(torus)
     assert len(set(dones)) > 2 * res.info["tiles"]  # more steps than tiles
+
+
+def test_dense_tiles_share_one_stage1_and_hold_only_thinned_halos(monkeypatch):
+    # Dense clouds: the thinned points' normals, outlier tests and the orientation graph are
+    # made once for the whole cloud (TiledRun), and a tile's halo holds only the thinned
+    # points, the only ones its fits read. Short halos (regrown tiles) and an executor too.
+    from curvature.pipeline.spatial_order import morton_order
+
+    pts = synthetic.sphere(40_000, noise=0.8, seed=3).points[:20_000]
+    whole = curvature.estimate(pts, dense_noise=0.3, tile_points=0)
+    assert whole.info["plan"]["dense"] is not None
+    spts = np.ascontiguousarray(pts[morton_order(pts)])
+    req = resolve_request(None, None, None, {"dense_noise": 0.3}, None, None, None, 1, 2000)
+    run = tiling.TiledRun(spts, None, req, 5000)
+    thin, field, r_normal, outlier = run.dense_stage1
+    share = run.plan.dense_share
+    assert abs(thin.size / len(pts) - share) < 0.02 and np.all(np.diff(thin) > 0)
+    assert field.shape == (thin.size, 3) and r_normal.shape == outlier.shape == thin.shape
+    for tile in run.tiles:
+        inp = run.input(tile)
+        own = (inp.members >= tile.start) & (inp.members < tile.stop)
+        assert np.all(np.isin(inp.members[~own], thin)) and own.sum() == tile.stop - tile.start
+        local = inp.dense_stage1[0]
+        np.testing.assert_array_equal(inp.members[local], thin[np.isin(thin, inp.members)])
+    tiled = curvature.estimate(pts, dense_noise=0.3, tile_points=5000)
+    assert_identical(whole, tiled)
+    monkeypatch.setattr(tiling, "AUTO_HALO", 0.5)
+    short = curvature.estimate(pts, dense_noise=0.3, tile_points=5000,
+                               executor=RecordingExecutor())
+    assert short.info["regrown"] > 0
+    assert_identical(whole, short)
