@@ -142,8 +142,8 @@ def halo_guess(req: Request, spacing: float, fit_radius: float = math.nan) -> fl
     return HALO_MARGIN * reach
 
 
-def orientation_graph(spts: np.ndarray, tree: tuple, graph: np.ndarray,
-                      chunk_size: int) -> None:
+def orientation_graph(spts: np.ndarray, tree: tuple, graph: np.ndarray, chunk_size: int,
+                      tick=None) -> None:
     """Each point's ``graph.shape[1]`` nearest neighbors (themselves first), in place.
 
     Parameters
@@ -153,11 +153,15 @@ def orientation_graph(spts: np.ndarray, tree: tuple, graph: np.ndarray,
         :func:`~curvature.neighborhoods.kdtree.build_tree` over ``spts``.
     graph : ndarray, shape (n, g), int32
     chunk_size : int
+    tick : callable, optional
+        Called with the count of points done after each chunk.
     """
     n, k = graph.shape
     for start in range(0, n, chunk_size):
         rows = np.arange(start, min(start + chunk_size, n), dtype=np.int64)
         graph[rows] = knn_csr(spts, tree, rows, k)[1].reshape(-1, k)
+        if tick is not None:
+            tick(rows.shape[0])
 
 
 def fit_radius(spts: np.ndarray, tree: tuple, k: int, sample: np.ndarray | None = None) -> float:
@@ -339,6 +343,9 @@ class TiledRun:
         Faces in Z-order indices (method "mesh").
     req : Request
     tile_points : int
+    progress : callable, optional
+        ``progress(0, n)`` is called while the whole cloud's stage-1 work runs (dense
+        clouds, before any tile): it may raise to cancel.
     """
 
     spts: np.ndarray
@@ -349,6 +356,7 @@ class TiledRun:
     mesh_graph: tuple | None = None
     tiles: list = field(default_factory=list)
     regrown: int = 0
+    progress: object = None
 
     def __post_init__(self):
         n = self.spts.shape[0]
@@ -372,11 +380,13 @@ class TiledRun:
             # which holds 2 to 3 times the tile's points (10M-point torus, tiles of 1M).
             # Its tiles then need no other halo point, and so no tree of their own for
             # the orientation graph: that is made here too.
+            # (no point is done yet, but a progress call may cancel the run)
+            tick = None if self.progress is None else (lambda count: self.progress(0, n))
             self.dense_stage1 = whole_dense_stage1(self.spts, tree, self.plan,
                                                    self.req.auto_params,
-                                                   self.req.chunk_size)
+                                                   self.req.chunk_size, tick)
             if self.graph is not None:
-                orientation_graph(self.spts, tree, self.graph, self.req.chunk_size)
+                orientation_graph(self.spts, tree, self.graph, self.req.chunk_size, tick)
         del tree
         self.extent = diagonal(self.spts)
         self.tiles = make_tiles(self.spts, self.tile_points,
@@ -425,7 +435,7 @@ def run_tiled(spts, s_faces, req: Request, tile_points: int, progress=None, exec
     info, timings : dict
     """
     t0 = time.perf_counter()
-    run = TiledRun(spts, s_faces, req, tile_points)
+    run = TiledRun(spts, s_faces, req, tile_points, progress=progress)
     t_plan = time.perf_counter() - t0
     n = spts.shape[0]
     if executor is None:

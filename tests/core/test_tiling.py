@@ -273,3 +273,16 @@ def test_dense_tiles_share_one_stage1_and_hold_only_thinned_halos(monkeypatch):
                                executor=RecordingExecutor())
     assert short.info["regrown"] > 0
     assert_identical(whole, short)
+
+
+def test_the_whole_cloud_stage1_of_a_dense_cloud_reports_and_can_be_cancelled():
+    pts = synthetic.sphere(40_000, noise=0.8, seed=3).points[:20_000]
+    calls = []
+
+    def cancel(done, total):
+        calls.append((done, total))
+        raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        curvature.estimate(pts, dense_noise=0.3, tile_points=5000, progress=cancel)
+    assert calls == [(0, len(pts))]  # before any tile ran
