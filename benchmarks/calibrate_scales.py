@@ -51,7 +51,7 @@ def rung_errors(cloud, anchors: int, normal_k: int = 48, seed: int = 0):
     one = [np.empty(1), np.empty(1), np.empty(1, np.int8), np.empty(1), np.empty(1, np.int8)]
     for j, p in enumerate(idx):
         nbr = indices[indptr[j]:indptr[j + 1]]
-        quads, est = np.empty((levels, N_QUAD)), np.empty((rows, 6))
+        quads, est = np.empty((levels, N_QUAD)), np.empty((rows, 7))
         ladder_estimates(pts, field, p, nbr, ladder, kinds, quads, est)
         counts = list(ladder)
         for t, size in enumerate(tops):

@@ -45,13 +45,14 @@ import numpy as np
 from numba import njit, prange
 
 from .kernels import MAX_FOOT_DIST, fit_monge, gather_local, principal_axes, spans_surface
+from .linalg import cholesky, solve_lower
 from .normal_field import nfr_anchor_fits_one, supported
 from .normal_quadric import N_QUAD, curvature_from_quadric, regress_normal_quadric
 from .quadric import OK, foot_point, gradient_at, sampson_rms, shape_operator
 
-__all__ = ["DEFAULT_GAMMA", "KIND_MONGE", "KIND_MONGE_RIDGE", "KIND_NORMAL_QUADRIC", "RUNGS",
-           "SIGMA_FLOOR", "TOPS", "ladder_estimates", "multiscale_anchor_fits", "pass_rungs",
-           "scale_sigma"]
+__all__ = ["DEFAULT_GAMMA", "DESIGN_ISOTROPIC", "KIND_MONGE", "KIND_MONGE_RIDGE",
+           "KIND_NORMAL_QUADRIC", "RUNGS", "SIGMA_FLOOR", "TOPS", "design_spread",
+           "ladder_estimates", "multiscale_anchor_fits", "pass_rungs", "scale_sigma"]
 
 #: Rung models: a positional Monge quadric, the normal-constrained quadric, or a Monge
 #: quadric with CIRCULAR_ROUNDS of the circular correction (kernels.fit_monge). On a filleted
@@ -141,6 +142,28 @@ SWITCH_SLACK = 3.0 / 3.5
 BIAS_SHARE_MIN = 0.25
 # A foot point farther than this many fit units from the anchor means the fit missed it.
 FOOT_LIMIT = 2.0
+#: The calibrated sigma of a Monge rung assumes its points spread around the anchor as in
+#: the cloud's interior. A patch cut by the cloud's border (a half-disk) determines the
+#: quadratic terms about 3.4 times worse: :func:`design_spread` is sqrt(s) times the largest
+#: standard error, per unit of noise, of the Hessian terms of the least-squares height fit in
+#: the patch's RMS unit; a uniformly filled disk gives DESIGN_ISOTROPIC (sqrt 18 = 4.24; over
+#: random 48-point disks the median is 4.8 and the 99.5th percentile 6.9, over half-disks the
+#: median 16). An isotropic rung's sigma grows by the ratio to DESIGN_SLACK times that, so
+#: inner patches keep theirs. Without it the border points of 10,000-point planes at 0.1 %
+#: noise kept 48-point fits that read |k| up to 6 with standard errors of 0.4 to 0.6: at
+#: border points (within 1 spacing) the 48-point rung erred a median 2.2 of its standard
+#: error, 1.1 inside; with it 1.1 at both (p99 3.5 and 3.1). Of inner patches 0.7 % of the
+#: 48-point rungs' and 15 % of the 24-point rungs' sigmas grow, by at most 1.2 and 1.8.
+DESIGN_ISOTROPIC = np.sqrt(18.0)
+DESIGN_SLACK = 1.6
+#: The same for a ridge rung's patch, stretched RIDGE_ASPECT times along the ridge: median
+#: over random 96-point ellipses of that aspect 10.8 (99.5th percentile 15.2; cut along the
+#: ridge by a border, 38). Its slack is lower: with DESIGN_SLACK the border's ridge rungs still
+#: erred a median 1.54 of their standard errors (p99 6.4) against 1.24 inside; with
+#: RIDGE_DESIGN_SLACK 1.24 (p99 5.0), and 4.8 % of inner ridge rungs' sigmas grow, by at most
+#: 1.13.
+DESIGN_RIDGE = 10.8
+RIDGE_DESIGN_SLACK = 1.25
 
 
 def pass_rungs(k: int, stage: str, fallback: int | None = None) -> tuple[np.ndarray, ...]:
@@ -202,9 +225,10 @@ def _monge_rung(points, field, p, nbr, quad, circular, frame):
 
     Returns
     -------
-    status, h, distance, k1, k2
-        Fit status, coordinate unit, RMS residual distance (input units) and the curvatures
-        at p's foot point, signed against ``field[p]`` (the quadric is negated to agree).
+    status, h, distance, k1, k2, design
+        Fit status, coordinate unit, RMS residual distance (input units), the curvatures
+        at p's foot point, signed against ``field[p]`` (the quadric is negated to agree),
+        and the patch's :func:`design_spread`.
     """
     # Neighbors without a normal are outliers (curvature.fitting.outliers): left out.
     keep = np.empty(nbr.shape[0], nbr.dtype)
@@ -214,19 +238,20 @@ def _monge_rung(points, field, p, nbr, quad, circular, frame):
             keep[count] = nbr[i]
             count += 1
     if count < 6:
-        return 1, 0.0, np.nan, np.nan, np.nan
+        return 1, 0.0, np.nan, np.nan, np.nan, np.inf
     xs, h = gather_local(points, p, keep[:count], True)
     if not h > 0.0:
-        return 2, 0.0, np.nan, np.nan, np.nan
+        return 2, 0.0, np.nan, np.nan, np.nan, np.inf
     w, axes = principal_axes(xs)
     if not spans_surface(w):
-        return 2, h, np.nan, np.nan, np.nan
+        return 2, h, np.nan, np.nan, np.nan, np.inf
+    design = design_spread(xs, axes)
     a, b, c, ok = fit_monge(xs, axes, circular)
     if not ok:
-        return 2, h, np.nan, np.nan, np.nan
+        return 2, h, np.nan, np.nan, np.nan, np.inf
     x0, found = foot_point(a, b, c, MAX_FOOT_DIST)
     if not found:
-        return 3, h, np.nan, np.nan, np.nan
+        return 3, h, np.nan, np.nan, np.nan, np.inf
     g = gradient_at(a, b, x0)
     n_p = field[p]
     if g[0] * n_p[0] + g[1] * n_p[1] + g[2] * n_p[2] < 0.0:
@@ -239,7 +264,45 @@ def _monge_rung(points, field, p, nbr, quad, circular, frame):
     quad[3], quad[4], quad[5] = a[0, 1], a[0, 2], a[1, 2]
     quad[6], quad[7], quad[8] = b[0], b[1], b[2]
     quad[9] = c
-    return OK, h, sampson_rms(a, b, c, xs) * h, c1 / h, c2 / h
+    return OK, h, sampson_rms(a, b, c, xs) * h, c1 / h, c2 / h, design
+
+
+@njit(cache=True)
+def design_spread(xs, axes):
+    """sqrt(m) times the largest standard error of the Hessian terms (2a, b, 2c) of a
+    quadratic height fit over local points, per unit of noise, in their RMS unit
+    (:data:`DESIGN_ISOTROPIC` for a uniformly filled disk; inf for a degenerate design).
+
+    Parameters
+    ----------
+    xs : ndarray, shape (m, 3)
+        Local points, scaled to unit RMS distance (:func:`~.kernels.gather_local`).
+    axes : ndarray, shape (3, 3)
+        Their principal axes (columns, ascending spread): the tangent plane is the last two.
+    """
+    m = xs.shape[0]
+    gram = np.zeros((6, 6))
+    row = np.empty(6)
+    for i in range(m):
+        u = xs[i, 0] * axes[0, 2] + xs[i, 1] * axes[1, 2] + xs[i, 2] * axes[2, 2]
+        v = xs[i, 0] * axes[0, 1] + xs[i, 1] * axes[1, 1] + xs[i, 2] * axes[2, 1]
+        row[0], row[1], row[2], row[3], row[4], row[5] = u * u, u * v, v * v, u, v, 1.0
+        for r in range(6):
+            for c in range(r + 1):
+                gram[r, c] += row[r] * row[c]
+    for r in range(6):
+        for c in range(r):
+            gram[c, r] = gram[r, c]
+    lower, ok = cholesky(gram, 1e-12)
+    if not ok:
+        return np.inf
+    worst = 0.0
+    for term, weight in ((0, 4.0), (1, 1.0), (2, 4.0)):
+        unit = np.zeros(6)
+        unit[term] = 1.0
+        y = solve_lower(lower, unit)
+        worst = max(worst, weight * np.sum(y * y))
+    return np.sqrt(m * worst)
 
 
 @njit(cache=True)
@@ -284,11 +347,12 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out):
     ladder, kinds : ndarray, shape (l,), int64
     quads : ndarray, shape (l, N_QUAD)
         Output: each rung's packed quadric.
-    out : ndarray, shape (l, 6)
+    out : ndarray, shape (l, 7)
         Output per rung: ok (1; 2 for a Monge rung over the noise limit,
         :data:`MONGE_NOISE_LIMIT`; 0 for none), k1, k2, residual distance, h (the quadric's
-        unit) and the spread its standard error uses (h, but the width across the ridge for a
-        ridge rung).
+        unit), the spread its standard error uses (h, but the width across the ridge for a
+        ridge rung) and the factor its standard error grows by where its patch is cut by
+        the cloud's border (isotropic Monge rungs, :data:`DESIGN_SLACK`; else 1).
     """
     origin = np.zeros(3)
     frame = np.empty((3, 3))
@@ -296,21 +360,27 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out):
     framed = False  # whether frame holds the directions of a circular Monge rung
     for li in range(ladder.shape[0]):
         out[li, 0] = 0.0
+        out[li, 6] = 1.0
         s = ladder[li]
         spread = 0.0
+        inflate = 1.0
         if kinds[li] == KIND_MONGE_RIDGE:
             # A ridge rung needs the directions of a smaller fit and a list twice its size.
             if not framed or 2 * s > nbr.shape[0]:
                 continue
             pool = nbr[:min(nbr.shape[0], RIDGE_POOL)]
             patch, spread = _ridge_patch(points, p, pool, s, frame)
-            st, h, d, c1, c2 = _monge_rung(points, field, p, patch, quads[li],
-                                           CIRCULAR_ROUNDS, scratch)
+            st, h, d, c1, c2, design = _monge_rung(points, field, p, patch, quads[li],
+                                                   CIRCULAR_ROUNDS, scratch)
+            inflate = max(1.0, design / (RIDGE_DESIGN_SLACK * DESIGN_RIDGE))
         elif s >= nbr.shape[0]:
             continue
         elif kinds[li] != KIND_NORMAL_QUADRIC:
             rounds = CIRCULAR_ROUNDS if kinds[li] == KIND_MONGE_CIRCULAR else 0
-            st, h, d, c1, c2 = _monge_rung(points, field, p, nbr[:s], quads[li], rounds, frame)
+            st, h, d, c1, c2, design = _monge_rung(points, field, p, nbr[:s], quads[li],
+                                                   rounds, frame)
+            # a patch cut by the cloud's border: its sigma grows (DESIGN_SLACK)
+            inflate = max(1.0, design / (DESIGN_SLACK * DESIGN_ISOTROPIC))
             if st == OK and kinds[li] == KIND_MONGE_CIRCULAR:
                 # A ridge's direction: its curvature well below the one across it.
                 small, big = min(abs(c1), abs(c2)), max(abs(c1), abs(c2))
@@ -332,6 +402,7 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out):
         out[li, 3] = d
         out[li, 4] = h
         out[li, 5] = spread
+        out[li, 6] = inflate
 
 
 @njit(cache=True)
@@ -493,7 +564,7 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
         nbr = indices[indptr[j]:indptr[j + 1]]
         full = nbr.shape[0]
         quads = np.empty((levels, N_QUAD))
-        est = np.empty((levels + ntop, 6))
+        est = np.empty((levels + ntop, 7))
         ladder_estimates(points, field, p, nbr, ladder, kinds, quads, est)
         # Every top's full fit (both models) into scratch rows; the kept one is copied out.
         t_coef = np.empty((ntop,) + coef.shape[1:])
@@ -524,18 +595,20 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
                 est[row, 0] = 1.0
                 est[row, 1], est[row, 2], est[row, 3], est[row, 4] = fk1, fk2, fd, fh
                 est[row, 5] = fh
+                est[row, 6] = 1.0
         sg = np.full(levels + ntop, np.inf)
         for li in range(levels + ntop):
             if est[li, 0] == 1.0:
                 s = sizes[li]
                 if li >= levels:
                     s = (s + strides[li - levels] - 1) // strides[li - levels]
-                sg[li] = scale_sigma(est[li, 3], est[li, 5], s, calib[li])
+                sg[li] = scale_sigma(est[li, 3], est[li, 5], s, calib[li]) * est[li, 6]
         best = _lepski(est, sg, gamma, growth, levels)
         if best < 0:  # nothing else usable: the noise-limited Monge rungs (ladder_estimates)
             for li in range(levels):
                 if est[li, 0] == 2.0:
-                    sg[li] = scale_sigma(est[li, 3], est[li, 5], sizes[li], calib[li])
+                    sg[li] = (scale_sigma(est[li, 3], est[li, 5], sizes[li], calib[li])
+                              * est[li, 6])
             best = _lepski(est, sg, gamma, growth, levels)
         if best > 0:
             best = _least_error(est, sg, best, kinds, gamma)
