@@ -148,12 +148,12 @@ FOOT_LIMIT = 2.0
 #: standard error, per unit of noise, of the Hessian terms of the least-squares height fit in
 #: the patch's RMS unit; a uniformly filled disk gives DESIGN_ISOTROPIC (sqrt 18 = 4.24; over
 #: random 48-point disks the median is 4.8 and the 99.5th percentile 6.9, over half-disks the
-#: median 16). An isotropic rung's sigma grows by the ratio to DESIGN_SLACK times that, so
-#: inner patches keep theirs. Without it the border points of 10,000-point planes at 0.1 %
-#: noise kept 48-point fits that read |k| up to 6 with standard errors of 0.4 to 0.6: at
-#: border points (within 1 spacing) the 48-point rung erred a median 2.2 of its standard
-#: error, 1.1 inside; with it 1.1 at both (p99 3.5 and 3.1). Of inner patches 0.7 % of the
-#: 48-point rungs' and 15 % of the 24-point rungs' sigmas grow, by at most 1.2 and 1.8.
+#: median 16). Where a patch lies to one side of its anchor (:data:`BORDER_SIDE`), an isotropic
+#: rung's sigma grows by the ratio to DESIGN_SLACK times that. Without it the border points of
+#: 10,000-point planes at 0.1 % noise kept 48-point fits that read |k| up to 6 with standard
+#: errors of 0.4 to 0.6: at border points (within 1 spacing) the 48-point rung erred a median
+#: 2.2 of its standard error, 1.1 inside; with it 1.1 at both (p99 3.5 and 3.1). Inner
+#: patches keep theirs (of the 24-point rungs' 1.8 % grow, by at most 1.8).
 DESIGN_ISOTROPIC = np.sqrt(18.0)
 DESIGN_SLACK = 1.6
 #: The same for a ridge rung's patch, stretched RIDGE_ASPECT times along the ridge: median
@@ -164,6 +164,13 @@ DESIGN_SLACK = 1.6
 #: 1.13.
 DESIGN_RIDGE = 10.8
 RIDGE_DESIGN_SLACK = 1.25
+#: Only a patch whose points lie to one side of the anchor (``side`` of :func:`design_spread`
+#: above this; a half-disk's is 0.85, an inner 48-point patch's rarely above 0.45) is taken
+#: for one cut by the border. A patch bent around a leading edge also spreads less across it
+#: in the tangent plane, which the spread alone counted as a cut too (the bench's leading
+#: edge 2.14 -> 2.19). A patch around a thin rim's crest (radius 2 spacings) does lie to
+#: one side, its faces behind it, and counts (the plate's rims 17.9 -> 18.4).
+BORDER_SIDE = 0.5
 
 
 def pass_rungs(k: int, stage: str, fallback: int | None = None) -> tuple[np.ndarray, ...]:
@@ -225,10 +232,10 @@ def _monge_rung(points, field, p, nbr, quad, circular, frame):
 
     Returns
     -------
-    status, h, distance, k1, k2, design
+    status, h, distance, k1, k2, design, side
         Fit status, coordinate unit, RMS residual distance (input units), the curvatures
         at p's foot point, signed against ``field[p]`` (the quadric is negated to agree),
-        and the patch's :func:`design_spread`.
+        and the patch's :func:`design_spread` (both values).
     """
     # Neighbors without a normal are outliers (curvature.fitting.outliers): left out.
     keep = np.empty(nbr.shape[0], nbr.dtype)
@@ -238,20 +245,20 @@ def _monge_rung(points, field, p, nbr, quad, circular, frame):
             keep[count] = nbr[i]
             count += 1
     if count < 6:
-        return 1, 0.0, np.nan, np.nan, np.nan, np.inf
+        return 1, 0.0, np.nan, np.nan, np.nan, np.inf, 0.0
     xs, h = gather_local(points, p, keep[:count], True)
     if not h > 0.0:
-        return 2, 0.0, np.nan, np.nan, np.nan, np.inf
+        return 2, 0.0, np.nan, np.nan, np.nan, np.inf, 0.0
     w, axes = principal_axes(xs)
     if not spans_surface(w):
-        return 2, h, np.nan, np.nan, np.nan, np.inf
-    design = design_spread(xs, axes)
+        return 2, h, np.nan, np.nan, np.nan, np.inf, 0.0
+    design, side = design_spread(xs, axes)
     a, b, c, ok = fit_monge(xs, axes, circular)
     if not ok:
-        return 2, h, np.nan, np.nan, np.nan, np.inf
+        return 2, h, np.nan, np.nan, np.nan, np.inf, 0.0
     x0, found = foot_point(a, b, c, MAX_FOOT_DIST)
     if not found:
-        return 3, h, np.nan, np.nan, np.nan, np.inf
+        return 3, h, np.nan, np.nan, np.nan, np.inf, 0.0
     g = gradient_at(a, b, x0)
     n_p = field[p]
     if g[0] * n_p[0] + g[1] * n_p[1] + g[2] * n_p[2] < 0.0:
@@ -264,14 +271,16 @@ def _monge_rung(points, field, p, nbr, quad, circular, frame):
     quad[3], quad[4], quad[5] = a[0, 1], a[0, 2], a[1, 2]
     quad[6], quad[7], quad[8] = b[0], b[1], b[2]
     quad[9] = c
-    return OK, h, sampson_rms(a, b, c, xs) * h, c1 / h, c2 / h, design
+    return OK, h, sampson_rms(a, b, c, xs) * h, c1 / h, c2 / h, design, side
 
 
 @njit(cache=True)
 def design_spread(xs, axes):
     """sqrt(m) times the largest standard error of the Hessian terms (2a, b, 2c) of a
     quadratic height fit over local points, per unit of noise, in their RMS unit
-    (:data:`DESIGN_ISOTROPIC` for a uniformly filled disk; inf for a degenerate design).
+    (:data:`DESIGN_ISOTROPIC` for a uniformly filled disk; inf for a degenerate design), and
+    how far the points lie to one side: the larger of their mean tangent coordinates over
+    that coordinate's RMS (about 1 / sqrt(m) inside, 0.85 for a half-disk).
 
     Parameters
     ----------
@@ -279,6 +288,10 @@ def design_spread(xs, axes):
         Local points, scaled to unit RMS distance (:func:`~.kernels.gather_local`).
     axes : ndarray, shape (3, 3)
         Their principal axes (columns, ascending spread): the tangent plane is the last two.
+
+    Returns
+    -------
+    spread, side : float
     """
     m = xs.shape[0]
     gram = np.zeros((6, 6))
@@ -293,16 +306,20 @@ def design_spread(xs, axes):
     for r in range(6):
         for c in range(r):
             gram[c, r] = gram[r, c]
+    side = 0.0
+    for mean, square in ((gram[5, 3], gram[0, 5]), (gram[5, 4], gram[2, 5])):
+        if square > 0.0:
+            side = max(side, abs(mean) / np.sqrt(square * m))
     lower, ok = cholesky(gram, 1e-12)
     if not ok:
-        return np.inf
+        return np.inf, side
     worst = 0.0
     for term, weight in ((0, 4.0), (1, 1.0), (2, 4.0)):
         unit = np.zeros(6)
         unit[term] = 1.0
         y = solve_lower(lower, unit)
         worst = max(worst, weight * np.sum(y * y))
-    return np.sqrt(m * worst)
+    return np.sqrt(m * worst), side
 
 
 @njit(cache=True)
@@ -370,17 +387,18 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out):
                 continue
             pool = nbr[:min(nbr.shape[0], RIDGE_POOL)]
             patch, spread = _ridge_patch(points, p, pool, s, frame)
-            st, h, d, c1, c2, design = _monge_rung(points, field, p, patch, quads[li],
-                                                   CIRCULAR_ROUNDS, scratch)
-            inflate = max(1.0, design / (RIDGE_DESIGN_SLACK * DESIGN_RIDGE))
+            st, h, d, c1, c2, design, side = _monge_rung(points, field, p, patch, quads[li],
+                                                         CIRCULAR_ROUNDS, scratch)
+            if side > BORDER_SIDE:
+                inflate = max(1.0, design / (RIDGE_DESIGN_SLACK * DESIGN_RIDGE))
         elif s >= nbr.shape[0]:
             continue
         elif kinds[li] != KIND_NORMAL_QUADRIC:
             rounds = CIRCULAR_ROUNDS if kinds[li] == KIND_MONGE_CIRCULAR else 0
-            st, h, d, c1, c2, design = _monge_rung(points, field, p, nbr[:s], quads[li],
-                                                   rounds, frame)
-            # a patch cut by the cloud's border: its sigma grows (DESIGN_SLACK)
-            inflate = max(1.0, design / (DESIGN_SLACK * DESIGN_ISOTROPIC))
+            st, h, d, c1, c2, design, side = _monge_rung(points, field, p, nbr[:s],
+                                                         quads[li], rounds, frame)
+            if side > BORDER_SIDE:  # a patch cut by the cloud's border
+                inflate = max(1.0, design / (DESIGN_SLACK * DESIGN_ISOTROPIC))
             if st == OK and kinds[li] == KIND_MONGE_CIRCULAR:
                 # A ridge's direction: its curvature well below the one across it.
                 small, big = min(abs(c1), abs(c2)), max(abs(c1), abs(c2))

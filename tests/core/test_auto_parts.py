@@ -135,7 +135,7 @@ def test_a_patch_cut_by_the_border_has_a_wider_design():
     # sqrt(m) times the largest standard error of the height fit's Hessian terms, per unit of
     # noise: sqrt(18) for a uniformly filled disk; a half-disk about 3.4 times that
     rng = np.random.default_rng(5)
-    ratios = []
+    ratios, sides = [], []
     for _ in range(20):
         uv = rng.uniform(-1.0, 1.0, (400, 2))
         disk = uv[np.einsum("ij,ij->i", uv, uv) <= 1.0][:48]
@@ -146,14 +146,17 @@ def test_a_patch_cut_by_the_border_has_a_wider_design():
             xs[0] = 0.0  # the anchor at the origin, its neighbors around it
             xs /= np.sqrt(np.mean(np.sum(xs[1:] ** 2, axis=1)))
             _, axes = np.linalg.eigh(np.cov(xs.T))
-            spreads.append(scale_selection.design_spread(xs, axes))
+            spread, side = scale_selection.design_spread(xs, axes)
+            spreads.append(spread)
+            sides.append(side)
+        assert sides[-2] < scale_selection.BORDER_SIDE < sides[-1]
         assert 0.8 * scale_selection.DESIGN_ISOTROPIC < spreads[0] < 2.0 * \
             scale_selection.DESIGN_ISOTROPIC
         ratios.append(spreads[1] / spreads[0])
     assert 2.5 < np.median(ratios) < 5.0
     line = np.c_[np.linspace(-1, 1, 30), np.zeros(30), np.zeros(30)]
     _, axes = np.linalg.eigh(np.cov(line.T) + 1e-12 * np.eye(3))
-    assert scale_selection.design_spread(line, axes) == np.inf  # no second direction
+    assert scale_selection.design_spread(line, axes)[0] == np.inf  # no second direction
 
 
 def test_outliers_leave_the_inliers_nearly_unchanged(noisy_box):
