@@ -50,9 +50,10 @@ from .normal_field import nfr_anchor_fits_one, supported
 from .normal_quadric import N_QUAD, curvature_from_quadric, regress_normal_quadric
 from .quadric import OK, foot_point, gradient_at, sampson_rms, shape_operator
 
-__all__ = ["DEFAULT_GAMMA", "DESIGN_ISOTROPIC", "KIND_MONGE", "KIND_MONGE_RIDGE",
+__all__ = ["BORDER_SIDE", "DEFAULT_GAMMA", "DESIGN_ISOTROPIC", "KIND_MONGE", "KIND_MONGE_RIDGE",
            "KIND_NORMAL_QUADRIC", "RUNGS", "SIGMA_FLOOR", "TOPS", "design_spread",
-           "ladder_estimates", "multiscale_anchor_fits", "pass_rungs", "scale_sigma"]
+           "ladder_estimates", "multiscale_anchor_fits", "one_sided", "pass_rungs",
+           "scale_sigma"]
 
 #: Rung models: a positional Monge quadric, the normal-constrained quadric, or a Monge
 #: quadric with CIRCULAR_ROUNDS of the circular correction (kernels.fit_monge). On a filleted
@@ -164,8 +165,7 @@ DESIGN_SLACK = 1.6
 #: 1.13.
 DESIGN_RIDGE = 10.8
 RIDGE_DESIGN_SLACK = 1.25
-#: Only a patch whose points lie to one side of the anchor (``side`` of :func:`design_spread`
-#: above this; a half-disk's is 0.85, an inner 48-point patch's rarely above 0.45) is taken
+#: Only a patch whose points lie to one side of the anchor (:func:`one_sided` above this; a half-disk's is 0.85, an inner 48-point patch's rarely above 0.45) is taken
 #: for one cut by the border. A patch bent around a leading edge also spreads less across it
 #: in the tangent plane, which the spread alone counted as a cut too (the bench's leading
 #: edge 2.14 -> 2.19). A patch around a thin rim's crest (radius 2 spacings) does lie to
@@ -235,7 +235,8 @@ def _monge_rung(points, field, p, nbr, quad, circular, frame):
     status, h, distance, k1, k2, design, side
         Fit status, coordinate unit, RMS residual distance (input units), the curvatures
         at p's foot point, signed against ``field[p]`` (the quadric is negated to agree),
-        and the patch's :func:`design_spread` (both values).
+        :func:`one_sided` and, where that exceeds :data:`BORDER_SIDE`,
+        :func:`design_spread` (else 0).
     """
     # Neighbors without a normal are outliers (curvature.fitting.outliers): left out.
     keep = np.empty(nbr.shape[0], nbr.dtype)
@@ -252,7 +253,9 @@ def _monge_rung(points, field, p, nbr, quad, circular, frame):
     w, axes = principal_axes(xs)
     if not spans_surface(w):
         return 2, h, np.nan, np.nan, np.nan, np.inf, 0.0
-    design, side = design_spread(xs, axes)
+    # (the design only where the patch may be cut by the border: it costs a 6 x 6 solve)
+    side = one_sided(xs, axes)
+    design = design_spread(xs, axes) if side > BORDER_SIDE else 0.0
     a, b, c, ok = fit_monge(xs, axes, circular)
     if not ok:
         return 2, h, np.nan, np.nan, np.nan, np.inf, 0.0
@@ -275,12 +278,36 @@ def _monge_rung(points, field, p, nbr, quad, circular, frame):
 
 
 @njit(cache=True)
+def one_sided(xs, axes):
+    """How far local points lie to one side of the origin (the anchor): the larger of their
+    mean tangent coordinates over that coordinate's RMS (about 1 / sqrt(m) inside a cloud,
+    0.85 for a half-disk).
+
+    Parameters
+    ----------
+    xs : ndarray, shape (m, 3)
+        Local points relative to the anchor (:func:`~.kernels.gather_local`).
+    axes : ndarray, shape (3, 3)
+        Their principal axes (columns, ascending spread): the tangent plane is the last two.
+    """
+    m = xs.shape[0]
+    side = 0.0
+    for ax in (2, 1):
+        total, square = 0.0, 0.0
+        for i in range(m):
+            t = xs[i, 0] * axes[0, ax] + xs[i, 1] * axes[1, ax] + xs[i, 2] * axes[2, ax]
+            total += t
+            square += t * t
+        if square > 0.0:
+            side = max(side, abs(total) / np.sqrt(square * m))
+    return side
+
+
+@njit(cache=True)
 def design_spread(xs, axes):
     """sqrt(m) times the largest standard error of the Hessian terms (2a, b, 2c) of a
     quadratic height fit over local points, per unit of noise, in their RMS unit
-    (:data:`DESIGN_ISOTROPIC` for a uniformly filled disk; inf for a degenerate design), and
-    how far the points lie to one side: the larger of their mean tangent coordinates over
-    that coordinate's RMS (about 1 / sqrt(m) inside, 0.85 for a half-disk).
+    (:data:`DESIGN_ISOTROPIC` for a uniformly filled disk; inf for a degenerate design).
 
     Parameters
     ----------
@@ -288,10 +315,6 @@ def design_spread(xs, axes):
         Local points, scaled to unit RMS distance (:func:`~.kernels.gather_local`).
     axes : ndarray, shape (3, 3)
         Their principal axes (columns, ascending spread): the tangent plane is the last two.
-
-    Returns
-    -------
-    spread, side : float
     """
     m = xs.shape[0]
     gram = np.zeros((6, 6))
@@ -306,20 +329,17 @@ def design_spread(xs, axes):
     for r in range(6):
         for c in range(r):
             gram[c, r] = gram[r, c]
-    side = 0.0
-    for mean, square in ((gram[5, 3], gram[0, 5]), (gram[5, 4], gram[2, 5])):
-        if square > 0.0:
-            side = max(side, abs(mean) / np.sqrt(square * m))
     lower, ok = cholesky(gram, 1e-12)
     if not ok:
-        return np.inf, side
+        return np.inf
     worst = 0.0
+    unit = np.empty(6)
     for term, weight in ((0, 4.0), (1, 1.0), (2, 4.0)):
-        unit = np.zeros(6)
+        unit[:] = 0.0
         unit[term] = 1.0
         y = solve_lower(lower, unit)
         worst = max(worst, weight * np.sum(y * y))
-    return np.sqrt(m * worst), side
+    return np.sqrt(m * worst)
 
 
 @njit(cache=True)

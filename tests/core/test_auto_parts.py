@@ -146,9 +146,8 @@ def test_a_patch_cut_by_the_border_has_a_wider_design():
             xs[0] = 0.0  # the anchor at the origin, its neighbors around it
             xs /= np.sqrt(np.mean(np.sum(xs[1:] ** 2, axis=1)))
             _, axes = np.linalg.eigh(np.cov(xs.T))
-            spread, side = scale_selection.design_spread(xs, axes)
-            spreads.append(spread)
-            sides.append(side)
+            spreads.append(scale_selection.design_spread(xs, axes))
+            sides.append(scale_selection.one_sided(xs, axes))
         assert sides[-2] < scale_selection.BORDER_SIDE < sides[-1]
         assert 0.8 * scale_selection.DESIGN_ISOTROPIC < spreads[0] < 2.0 * \
             scale_selection.DESIGN_ISOTROPIC
@@ -156,7 +155,7 @@ def test_a_patch_cut_by_the_border_has_a_wider_design():
     assert 2.5 < np.median(ratios) < 5.0
     line = np.c_[np.linspace(-1, 1, 30), np.zeros(30), np.zeros(30)]
     _, axes = np.linalg.eigh(np.cov(line.T) + 1e-12 * np.eye(3))
-    assert scale_selection.design_spread(line, axes)[0] == np.inf  # no second direction
+    assert scale_selection.design_spread(line, axes) == np.inf  # no second direction
 
 
 def test_outliers_leave_the_inliers_nearly_unchanged(noisy_box):
