@@ -161,12 +161,12 @@ DESIGN_SLACK = 1.6
 #: over random 96-point ellipses of that aspect 10.8 (99.5th percentile 15.2; cut along the
 #: ridge by a border, 38). Its slack is lower: with DESIGN_SLACK the border's ridge rungs still
 #: erred a median 1.54 of their standard errors (p99 6.4) against 1.24 inside; with
-#: RIDGE_DESIGN_SLACK 1.24 (p99 5.0), and 4.8 % of inner ridge rungs' sigmas grow, by at most
-#: 1.13.
+#: RIDGE_DESIGN_SLACK 1.24 (p99 5.0), as inside.
 DESIGN_RIDGE = 10.8
 RIDGE_DESIGN_SLACK = 1.25
-#: Only a patch whose points lie to one side of the anchor (:func:`one_sided` above this; a half-disk's is 0.85, an inner 48-point patch's rarely above 0.45) is taken
-#: for one cut by the border. A patch bent around a leading edge also spreads less across it
+#: Only a patch whose points lie to one side of the anchor (:func:`one_sided` above this; a
+#: half-disk's is 0.85, an inner 48-point patch's rarely above 0.45) is taken for one cut by
+#: the border. A patch bent around a leading edge also spreads less across it
 #: in the tangent plane, which the spread alone counted as a cut too (the bench's leading
 #: edge 2.14 -> 2.19). A patch around a thin rim's crest (radius 2 spacings) does lie to
 #: one side, its faces behind it, and counts (the plate's rims 17.9 -> 18.4).
