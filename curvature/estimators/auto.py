@@ -664,12 +664,6 @@ class AutoRun:
         del field, radius
         self._anchored(res, stage1, reps, owner, kc, rows)
 
-    def dense_normal_k(self, normal_k: int) -> int:
-        """Neighbors of a dense cloud's stage-1 normals: as many of the whole cloud's points as
-        the thinned share leaves out (``normal_k / share``), at least ``normal_k``."""
-        return dense_normal_k(self.params["normal_k"], self.plan.dense_share, normal_k,
-                              self.points.shape[0])
-
     def share_k(self) -> int:
         """``max_share`` of the cloud's points (at least 48)."""
         return max(SHARE_MIN_K, int(self.params["max_share"] * self.plan.points))
@@ -1039,9 +1033,10 @@ class AutoRun:
         if given is None:
             cand = thinned_points(self.points, self.plan.dense_share)
             self._total += cand.shape[0]
-            given = dense_stage1(self.points, self.tree, cand, self.plan.spacing,
-                                 self.dense_normal_k(normal_k), normal_k, self.chunk_size,
-                                 self._tick)
+            k = dense_normal_k(self.params["normal_k"], self.plan.dense_share, normal_k,
+                               self.points.shape[0])
+            given = dense_stage1(self.points, self.tree, cand, self.plan.spacing, k, normal_k,
+                                 self.chunk_size, self._tick)
         cand, field, r_normal, outlier = given
         self.outliers[cand[outlier]] = True
         keep = ~outlier

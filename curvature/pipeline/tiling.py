@@ -246,11 +246,14 @@ def tile_input(spts: np.ndarray, tile: Tile, req: Request, plan, mesh_graph=None
     members = np.flatnonzero(inside).astype(np.int64)
     del inside
     if dense_stage1 is not None:
+        own = (members >= tile.start) & (members < tile.stop)
         thinned = dense_stage1[0]
-        at = np.minimum(np.searchsorted(thinned, members), thinned.shape[0] - 1)
-        members = members[(thinned[at] == members)
-                          | ((members >= tile.start) & (members < tile.stop))]
-        del at
+        if thinned.shape[0]:
+            at = np.minimum(np.searchsorted(thinned, members), thinned.shape[0] - 1)
+            own |= thinned[at] == members
+            del at
+        members = members[own]
+        del own
     if cubes:
         core = _cell_keys(spts, np.arange(tile.start, tile.stop, dtype=np.int64), lo,
                           tile.halo)
