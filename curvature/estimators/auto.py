@@ -483,12 +483,6 @@ def thinned_points(points: np.ndarray, share: float) -> np.ndarray:
     return np.flatnonzero(keep).astype(np.int64)
 
 
-def dense_normal_k(requested: int, share: float, normal_k: int, n: int) -> int:
-    """Neighbors of the stage-1 normals of a dense cloud thinned to ``share``: ``requested /
-    share``, at least ``normal_k``, at most :data:`DENSE_NORMAL_K` and ``n - 1``."""
-    return min(max(int(round(requested / share)), normal_k), DENSE_NORMAL_K, n - 1)
-
-
 def dense_stage1(points, tree, cand, spacing: float, k: int, normal_k: int, chunk_size: int,
                  tick=None):
     """Stage-1 normals and outlier tests of a dense cloud's thinned points, from one query.
@@ -510,7 +504,7 @@ def dense_stage1(points, tree, cand, spacing: float, k: int, normal_k: int, chun
     spacing : float
         The plan's spacing (outlier test).
     k, normal_k : int
-        Neighbors of the normals (:func:`dense_normal_k`) and of the outlier tests.
+        Neighbors of the normals and of the outlier tests.
     chunk_size : int
         Points of a 24-neighbor chunk; chunks hold as many neighbor entries.
     tick : callable, optional
@@ -549,14 +543,43 @@ def dense_stage1(points, tree, cand, spacing: float, k: int, normal_k: int, chun
 
 
 def whole_dense_stage1(points, tree, plan: AutoPlan, params: dict, chunk_size: int,
-                       tick=None) -> tuple:
-    """:func:`dense_stage1` of a whole dense cloud, as :meth:`AutoRun.run` makes it (for a
-    tiled run to share among its tiles)."""
+                       tick=None, cand=None) -> tuple:
+    """:func:`dense_stage1` of a whole dense cloud, at its thinned points ``cand``
+    (:func:`thinned_points` if not given), with normals over as many of the cloud's points as
+    the share leaves out (``normal_k / share``, at most :data:`DENSE_NORMAL_K`). Made by
+    :meth:`AutoRun.run`, or once by a tiled run for all its tiles."""
     n = points.shape[0]
     normal_k = min(params["normal_k"], n - 1)
-    cand = thinned_points(points, plan.dense_share)
-    k = dense_normal_k(params["normal_k"], plan.dense_share, normal_k, n)
+    if cand is None:
+        cand = thinned_points(points, plan.dense_share)
+    k = min(max(int(round(params["normal_k"] / plan.dense_share)), normal_k), DENSE_NORMAL_K,
+            n - 1)
     return dense_stage1(points, tree, cand, plan.spacing, k, normal_k, chunk_size, tick)
+
+
+def neighbor_rows(points, tree, graph, chunk_size: int, rows=None, tick=None) -> None:
+    """The ``graph.shape[1]`` nearest neighbors (each point first) of ``rows`` (increasing
+    int64; default every point) into ``graph[rows]``, in chunks.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+    tree : tuple
+        :func:`~curvature.neighborhoods.kdtree.build_tree` over ``points``.
+    graph : ndarray, shape (n, g), int32
+    chunk_size : int
+    rows : ndarray, shape (m,), int64, optional
+    tick : callable, optional
+        Called with the count of rows done after each chunk.
+    """
+    k = graph.shape[1]
+    count = points.shape[0] if rows is None else rows.shape[0]
+    for start in range(0, count, chunk_size):
+        stop = min(start + chunk_size, count)
+        query = np.arange(start, stop, dtype=np.int64) if rows is None else rows[start:stop]
+        graph[query] = knn_csr(points, tree, query, k)[1].reshape(-1, k)
+        if tick is not None:
+            tick(stop - start)
 
 
 class AutoRun:
@@ -628,7 +651,7 @@ class AutoRun:
             raise ValueError("dense_stage1 is given but the plan is not dense")
         if self.plan.dense is not None:
             self._dense(res, graph, np.arange(n, dtype=np.int64) if rows is None else rows,
-                        min(self.params["normal_k"], k_stage1), dense_stage1)
+                        dense_stage1)
             return
         self._total = 2 * n
         t0 = time.perf_counter()
@@ -954,7 +977,7 @@ class AutoRun:
         self.timings["refit"] = time.perf_counter() - t0
         return own[done], (reach[done] if reach is not None else None)
 
-    def _dense(self, res, graph, rows, normal_k: int, given=None) -> None:
+    def _dense(self, res, graph, rows, given=None) -> None:
         """Fits on a thinned share of a dense noisy cloud (``plan.dense``), read at ``rows``.
 
         The thinned points run the noisy branch as a cloud of their own, with stage-1 normals
@@ -965,7 +988,7 @@ class AutoRun:
         n = self.points.shape[0]
         share = self.plan.dense_share
         t0 = time.perf_counter()
-        idx, field, r_normal = self._dense_stage1(graph, rows, normal_k, given)
+        idx, field, r_normal = self._dense_stage1(graph, rows, given)
         self.timings["stage1"] = time.perf_counter() - t0
         sub = np.ascontiguousarray(self.points[idx])
         ns = idx.shape[0]
@@ -1011,7 +1034,7 @@ class AutoRun:
             d = np.linalg.norm(self.points[rows] - sub[reps[anchor_of]], axis=1)
             self.reach[rows] = 2.0 * d + fit_reach[anchor_of] + np.sqrt(3.0) * inner.plan.cell
 
-    def _dense_stage1(self, graph, rows, normal_k: int, given=None):
+    def _dense_stage1(self, graph, rows, given=None):
         """The stage-1 work of a dense cloud: orientation graph rows at ``rows`` and, unless
         ``given`` (a tile's share of the whole cloud's :func:`dense_stage1`), the thinned
         points' normals and outlier tests (:func:`dense_stage1`).
@@ -1025,18 +1048,12 @@ class AutoRun:
         """
         self._total = (2 if graph is not None else 1) * rows.shape[0]
         if graph is not None:
-            kg = graph.shape[1]
-            for sl in self._chunks(rows.shape[0]):
-                _, indices, _ = knn_csr(self.points, self.tree, rows[sl], kg)
-                graph[rows[sl]] = indices.reshape(-1, kg)
-                self._tick(sl.stop - sl.start)
+            neighbor_rows(self.points, self.tree, graph, self.chunk_size, rows, self._tick)
         if given is None:
             cand = thinned_points(self.points, self.plan.dense_share)
             self._total += cand.shape[0]
-            k = dense_normal_k(self.params["normal_k"], self.plan.dense_share, normal_k,
-                               self.points.shape[0])
-            given = dense_stage1(self.points, self.tree, cand, self.plan.spacing, k, normal_k,
-                                 self.chunk_size, self._tick)
+            given = whole_dense_stage1(self.points, self.tree, self.plan, self.params,
+                                       self.chunk_size, self._tick, cand)
         cand, field, r_normal, outlier = given
         self.outliers[cand[outlier]] = True
         keep = ~outlier

@@ -326,10 +326,7 @@ def design_spread(xs, axes):
         for r in range(6):
             for c in range(r + 1):
                 gram[r, c] += row[r] * row[c]
-    for r in range(6):
-        for c in range(r):
-            gram[c, r] = gram[r, c]
-    lower, ok = cholesky(gram, 1e-12)
+    lower, ok = cholesky(gram, 1e-12)  # (reads the lower triangle only)
     if not ok:
         return np.inf
     worst = 0.0

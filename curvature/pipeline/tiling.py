@@ -33,7 +33,13 @@ import numpy as np
 from numba import njit, prange
 
 from ..bounds import bounding_box, diagonal, inside_box
-from ..estimators.auto import knn_csr, plan_auto, plan_sample, whole_dense_stage1
+from ..estimators.auto import (
+    knn_csr,
+    neighbor_rows,
+    plan_auto,
+    plan_sample,
+    whole_dense_stage1,
+)
 from ..neighborhoods import make_finder
 from ..neighborhoods.kdtree import build_tree
 from ..orientation import ORIENT_K
@@ -140,28 +146,6 @@ def halo_guess(req: Request, spacing: float, fit_radius: float = math.nan) -> fl
     if req.fit == "nfr":
         reach += size(req.fit_opts.get("normal_k", 48))
     return HALO_MARGIN * reach
-
-
-def orientation_graph(spts: np.ndarray, tree: tuple, graph: np.ndarray, chunk_size: int,
-                      tick=None) -> None:
-    """Each point's ``graph.shape[1]`` nearest neighbors (themselves first), in place.
-
-    Parameters
-    ----------
-    spts : ndarray, shape (n, 3)
-    tree : tuple
-        :func:`~curvature.neighborhoods.kdtree.build_tree` over ``spts``.
-    graph : ndarray, shape (n, g), int32
-    chunk_size : int
-    tick : callable, optional
-        Called with the count of points done after each chunk.
-    """
-    n, k = graph.shape
-    for start in range(0, n, chunk_size):
-        rows = np.arange(start, min(start + chunk_size, n), dtype=np.int64)
-        graph[rows] = knn_csr(spts, tree, rows, k)[1].reshape(-1, k)
-        if tick is not None:
-            tick(rows.shape[0])
 
 
 def fit_radius(spts: np.ndarray, tree: tuple, k: int, sample: np.ndarray | None = None) -> float:
@@ -389,7 +373,7 @@ class TiledRun:
                                                    self.req.auto_params,
                                                    self.req.chunk_size, tick)
             if self.graph is not None:
-                orientation_graph(self.spts, tree, self.graph, self.req.chunk_size, tick)
+                neighbor_rows(self.spts, tree, self.graph, self.req.chunk_size, tick=tick)
         del tree
         self.extent = diagonal(self.spts)
         self.tiles = make_tiles(self.spts, self.tile_points,
