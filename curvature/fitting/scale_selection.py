@@ -28,7 +28,9 @@ intersection of confidence intervals rule (Goldenshluger & Nemirovski, Math. Met
   curvature's direction: as narrow across the ridge as the 48-point rung, with twice its points;
 * the largest fit is kept whose k1 and k2 agree with those of every smaller fit within ``gamma
   (sigma_s + sigma_r)`` (Lepski's rule: its bias is not visible above the noise of any smaller fit;
-  the 24-point fit only checks the 48-point one), and whose sigma is at most :data:`SIGMA_GROWTH`
+  the 24-point fit only checks the 48-point one, and the normal quadrics do not check a top
+  that kept the polynomial normal field where Monge rungs do, :func:`_witnesses`), and whose
+  sigma is at most :data:`SIGMA_GROWTH`
   times the smallest below it: a fit that reached across a thin wall or over an edge has a large
   residual distance, and so a large sigma, even while its wide interval still overlaps the others;
 * a smaller Monge rung that the kept fit disagrees with by clearly more than their errors, and
@@ -46,7 +48,7 @@ from numba import njit, prange
 
 from .kernels import MAX_FOOT_DIST, fit_monge, gather_local, principal_axes, spans_surface
 from .linalg import cholesky, solve_lower
-from .normal_field import nfr_anchor_fits_one, supported
+from .normal_field import MODEL_FIELD, nfr_anchor_fits_one, supported
 from .normal_quadric import N_QUAD, curvature_from_quadric, regress_normal_quadric
 from .quadric import OK, foot_point, gradient_at, sampson_rms, shape_operator
 
@@ -448,13 +450,14 @@ def _agree(est, sg, a, b, gamma):
 
 
 @njit(cache=True)
-def _lepski(est, sg, gamma, growth, first_top):
+def _lepski(est, sg, gamma, growth, first_top, witness):
     """Index of the fit to keep: the largest whose k1 and k2 agree with those of every smaller
     fit within ``gamma`` times the sum of both sigmas, and whose sigma is at most ``growth``
     times the smallest sigma below it (-1 when none is usable). A top above the first
     (index above ``first_top``) must also agree with the top just below it within
     :data:`TOP_AGREEMENT` times their combined sigma: the two fit the same model to nested
-    patches, so their noise is shared and a small difference already shows a bias.
+    patches, so their noise is shared and a small difference already shows a bias. A fit r
+    judges a larger fit c only where ``witness[c, r]`` (:func:`_witnesses`).
 
     Each candidate is compared with every smaller rung directly, not with a running intersection, so
     one chance disagreement between two noisy small fits does not stop the selection at the smallest
@@ -475,7 +478,7 @@ def _lepski(est, sg, gamma, growth, first_top):
             if not np.isfinite(sg[r]):
                 continue
             smallest = min(smallest, sg[r])
-            if r == 0 and c > 1:
+            if (r == 0 and c > 1) or not witness[c, r]:
                 continue
             if not _agree(est, sg, c, r, gamma):
                 agrees = False
@@ -553,6 +556,37 @@ def _least_error(est, sg, best, kinds, gamma):
         if consistent:
             keep, least = r, e
     return keep
+
+
+@njit(cache=True)
+def _witnesses(kinds, t_status, t_model, levels):
+    """Which smaller fit judges which in Lepski's rule: ``witness[c, r]``, shape (l + t, l + t).
+
+    Every smaller fit judges a larger one, except that where the ladder has positional
+    (Monge) rungs, the normal-quadric rungs do not judge a top that kept the polynomial normal
+    field. That top kept it because the quadric misfits its patch, and the smaller quadrics
+    share that misfit: on a 10,000-point torus at 0.1 % noise (730 anchors, stage-1 normals)
+    the 96- and 192-point quadrics erred a median 3.9 and 6.0 of their standard errors, the
+    384-point top 0.8. The Monge rungs, which depend on no normal, still judge it. Measured
+    (docs/accuracy.md section 9, step 10): torus 0.5 to 10 % less error at 0.1 to 0.5 %
+    noise, the blade's sides 15 % less, the filleted box's faces 5 % more (k2 12 %); other
+    smooth shapes within 1 %. Without Monge rungs (the first pass, which only refines normals)
+    the quadrics are a top's only judges and keep judging: dropping them there too spread
+    fillet curvature onto the box's faces (0.10 -> 0.12) for little gain on the torus.
+    """
+    count = levels + t_status.shape[0]
+    witness = np.ones((count, count), np.bool_)
+    positional = False
+    for li in range(levels):
+        positional = positional or kinds[li] != KIND_NORMAL_QUADRIC
+    if not positional:
+        return witness
+    for t in range(t_status.shape[0]):
+        if t_status[t] == OK and t_model[t] == MODEL_FIELD:
+            for li in range(levels):
+                if kinds[li] == KIND_NORMAL_QUADRIC:
+                    witness[levels + t, li] = False
+    return witness
 
 
 @njit(parallel=True, cache=True)
@@ -638,13 +672,14 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
                 if li >= levels:
                     s = (s + strides[li - levels] - 1) // strides[li - levels]
                 sg[li] = scale_sigma(est[li, 3], est[li, 5], s, calib[li]) * est[li, 6]
-        best = _lepski(est, sg, gamma, growth, levels)
+        witness = _witnesses(kinds, t_status, t_model, levels)
+        best = _lepski(est, sg, gamma, growth, levels, witness)
         if best < 0:  # nothing else usable: the noise-limited Monge rungs (ladder_estimates)
             for li in range(levels):
                 if est[li, 0] == 2.0:
                     sg[li] = (scale_sigma(est[li, 3], est[li, 5], sizes[li], calib[li])
                               * est[li, 6])
-            best = _lepski(est, sg, gamma, growth, levels)
+            best = _lepski(est, sg, gamma, growth, levels, witness)
         if best > 0:
             best = _least_error(est, sg, best, kinds, gamma)
         # The top to report when nothing is usable: the largest that fitted, else the first

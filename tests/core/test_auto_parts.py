@@ -210,3 +210,31 @@ def test_rotated_box_keeps_its_region_errors(noisy_box):
     for region in ("face", "fillet", "corner"):
         before = region_mean(cloud, res, region)
         assert region_mean(cloud, other, region) <= 1.25 * before + 0.02
+
+
+def test_normal_quadric_rungs_do_not_judge_a_normal_field_top():
+    # Rungs of the fit pass (24, 48 Monge, 96 ridge, 96 and 192 normal quadrics) and two
+    # tops. The quadric rungs read k1 10 standard errors off the tops (their own misfit on a
+    # surface no quadric follows, as on a torus's tube); the Monge rungs agree with the tops.
+    kinds = np.array([r[1] for r in scale_selection.RUNGS["fit"]], np.int64)
+    levels = kinds.shape[0]
+    quadric = kinds == scale_selection.KIND_NORMAL_QUADRIC
+    est = np.zeros((levels + 2, 7))
+    est[:, 0] = 1.0
+    est[:, 1] = 1.0
+    est[:levels, 1][quadric] = 1.2
+    sg = np.full(levels + 2, 0.01)
+    t_status = np.zeros(2, np.int8)  # both tops OK
+    field, quadric_top = np.zeros(2, np.int8), np.ones(2, np.int8)  # MODEL_FIELD, MODEL_QUADRIC
+    gamma = scale_selection.DEFAULT_GAMMA
+    witness = scale_selection._witnesses(kinds, t_status, field, levels)
+    assert not witness[levels:, :levels][:, quadric].any()
+    assert witness[levels:, :levels][:, ~quadric].all() and witness[:levels].all()
+    assert scale_selection._lepski(est, sg, gamma, 2.0, levels, witness) == levels + 1
+    # A top that kept the quadric shares the rungs' model: they judge it and turn it down.
+    witness = scale_selection._witnesses(kinds, t_status, quadric_top, levels)
+    assert witness.all()
+    assert scale_selection._lepski(est, sg, gamma, 2.0, levels, witness) < levels
+    # The first pass has no Monge rungs: its quadric rungs are the only judges and stay.
+    refine = np.array([r[1] for r in scale_selection.RUNGS["refine"]], np.int64)
+    assert scale_selection._witnesses(refine, t_status, field, refine.shape[0]).all()
