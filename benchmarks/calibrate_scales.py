@@ -51,15 +51,16 @@ def rung_errors(cloud, anchors: int, normal_k: int = 48, seed: int = 0):
     one = [np.empty(1), np.empty(1), np.empty(1, np.int8), np.empty(1), np.empty(1, np.int8)]
     for j, p in enumerate(idx):
         nbr = indices[indptr[j]:indptr[j + 1]]
-        quads, est = np.empty((levels, N_QUAD)), np.empty((rows, 7))
+        quads, est = np.empty((levels, N_QUAD)), np.empty((rows, 8))
         ladder_estimates(pts, field, p, nbr, ladder, kinds, quads, est)
         counts = list(ladder)
         for t, size in enumerate(tops):
             stride = max(1, size // TOP_POINTS)
             sub = nbr[:size:stride]
-            fk1, fk2, fd, fh = nfr_anchor_fits_one(pts, field, p, sub, 0.7, coef, quad, frame,
-                                                   0, one[0], one[1], one[2], one[3], one[4])
-            est[levels + t] = (1.0 if one[4][0] == 0 else 0.0, fk1, fk2, fd, fh, fh)
+            fk1, fk2, fd, fh, fm = nfr_anchor_fits_one(pts, field, p, sub, 0.7, coef, quad,
+                                                       frame, 0, one[0], one[1], one[2],
+                                                       one[3], one[4])
+            est[levels + t] = (1.0 if one[4][0] == 0 else 0.0, fk1, fk2, fd, fh, fh, 1.0, fm)
             counts.append(sub.shape[0])
         sign = 1.0 if np.dot(field[p], cloud.normals[p]) >= 0 else -1.0
         t1, t2 = (cloud.k1[p], cloud.k2[p]) if sign > 0 else (-cloud.k2[p], -cloud.k1[p])

@@ -409,6 +409,9 @@ def nfr_anchor_fits_one(points, field, p, nbr, nfr_ratio, coef_j, quad_j, frame_
         The kept model's RMS distance of the fitted points to its surface.
     radius : float
         RMS distance of the fitted points from the anchor.
+    misfit : float
+        The kept model's mean squared residual of the fitted normals (about the squared
+        angle between each normal and the model's).
     """
     st, h, t1, t2, res, mis = regress_normals(points, field, p, nbr, True, coef_j)
     qst, qh, qmis, qres = regress_normal_quadric(points, field, p, nbr, True, quad_j)
@@ -424,20 +427,20 @@ def nfr_anchor_fits_one(points, field, p, nbr, nfr_ratio, coef_j, quad_j, frame_
         residual[j] = qres
         fst, c1, c2, _, _, _ = curvature_from_quadric(quad_j, qh, np.zeros(3), FOOT_LIMIT)
         if fst != OK:
-            return np.nan, np.nan, qres, qh
-        return c1, c2, qres, qh
+            return np.nan, np.nan, qres, qh, qmis
+        return c1, c2, qres, qh, qmis
     model[j] = MODEL_FIELD
     status[j] = st
     residual[j] = res
     if st != OK:
-        return np.nan, np.nan, res, qh
+        return np.nan, np.nan, res, qh, mis
     # Scratch outputs of one row: curvature_from_field writes into result arrays.
     k1o, k2o = np.empty(1), np.empty(1)
     vecs = np.empty((3, 1, 3))
     if not curvature_from_field(coef_j, h, field[p], t1, t2, 0.0, 0.0, 0, k1o, k2o, vecs[0],
                                 vecs[1], vecs[2]):
-        return np.nan, np.nan, res, qh
-    return k1o[0], k2o[0], res, qh
+        return np.nan, np.nan, res, qh, mis
+    return k1o[0], k2o[0], res, qh, mis
 
 
 @njit(parallel=True, cache=True)

@@ -28,9 +28,9 @@ intersection of confidence intervals rule (Goldenshluger & Nemirovski, Math. Met
   curvature's direction: as narrow across the ridge as the 48-point rung, with twice its points;
 * the largest fit is kept whose k1 and k2 agree with those of every smaller fit within ``gamma
   (sigma_s + sigma_r)`` (Lepski's rule: its bias is not visible above the noise of any smaller fit;
-  the 24-point fit only checks the 48-point one, and the normal quadrics do not check a top
-  that kept the polynomial normal field where Monge rungs do, :func:`_witnesses`), and whose
-  sigma is at most :data:`SIGMA_GROWTH`
+  the 24-point fit only checks the 48-point one, and a normal quadric that misfits its
+  normals more than a top's polynomial normal field does not check that top,
+  :func:`_witnesses`), and whose sigma is at most :data:`SIGMA_GROWTH`
   times the smallest below it: a fit that reached across a thin wall or over an edge has a large
   residual distance, and so a large sigma, even while its wide interval still overlaps the others;
 * a smaller Monge rung that the kept fit disagrees with by clearly more than their errors, and
@@ -173,6 +173,20 @@ RIDGE_DESIGN_SLACK = 1.25
 #: edge 2.14 -> 2.19). A patch around a thin rim's crest (radius 2 spacings) does lie to
 #: one side, its faces behind it, and counts (the plate's rims 17.9 -> 18.4).
 BORDER_SIDE = 0.5
+#: A normal-quadric rung does not judge a top that kept the polynomial normal field where the
+#: rung's mean squared normal misfit exceeds this many times the top's (:func:`_witnesses`).
+#: On a torus the quadric misfits any patch of its tube, so the 96- and 192-point quadrics
+#: erred a median 2.9 and 5.6 of their standard errors (10,000 points, 0.1 % view
+#: noise, refined normals; the 384 and 768 tops 1.2 and 0.7) and turned the tops down where
+#: their disagreement passed 3.5 standard errors. On a box's face near a fillet the smaller
+#: quadrics fit the face and their misfit is below the top's, so they keep judging. Measured
+#: (10,000-point clouds, seeds 1 and 2, mean |error|; docs/accuracy.md section 9, step 10):
+#: torus 2 to 16 % less at 0.1 to 0.5 % noise, the blade's sides 23 % less, the filleted
+#: box's faces 1 % more; Bezier patch and cylinder 1 to 7 % more. 0.7 and 1.5 gave about the
+#: same; leaving every quadric rung out of judging such a top (no misfit test) cost the box's
+#: faces 5 to 14 %, and leaving them out of the growth test too spread fillet curvature over
+#: them (0.10 -> 0.13 to 0.22).
+WITNESS_MISFIT = 1.0
 
 
 def pass_rungs(k: int, stage: str, fallback: int | None = None) -> tuple[np.ndarray, ...]:
@@ -383,12 +397,13 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out):
     ladder, kinds : ndarray, shape (l,), int64
     quads : ndarray, shape (l, N_QUAD)
         Output: each rung's packed quadric.
-    out : ndarray, shape (l, 7)
+    out : ndarray, shape (l, 8)
         Output per rung: ok (1; 2 for a Monge rung over the noise limit,
         :data:`MONGE_NOISE_LIMIT`; 0 for none), k1, k2, residual distance, h (the quadric's
         unit), the spread its standard error uses (h, but the width across the ridge for a
-        ridge rung) and the factor its standard error grows by where its patch is cut by
-        the cloud's border (isotropic Monge rungs, :data:`DESIGN_SLACK`; else 1).
+        ridge rung), the factor its standard error grows by where its patch is cut by
+        the cloud's border (isotropic Monge rungs, :data:`DESIGN_SLACK`; else 1) and the
+        normal misfit of a normal-quadric rung (0 for the others).
     """
     origin = np.zeros(3)
     frame = np.empty((3, 3))
@@ -397,9 +412,11 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out):
     for li in range(ladder.shape[0]):
         out[li, 0] = 0.0
         out[li, 6] = 1.0
+        out[li, 7] = 0.0
         s = ladder[li]
         spread = 0.0
         inflate = 1.0
+        misfit = 0.0
         if kinds[li] == KIND_MONGE_RIDGE:
             # A ridge rung needs the directions of a smaller fit and a list twice its size.
             if not framed or 2 * s > nbr.shape[0]:
@@ -423,7 +440,8 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out):
                 small, big = min(abs(c1), abs(c2)), max(abs(c1), abs(c2))
                 framed = small <= RIDGE_RATIO * big
         else:
-            st, h, _, d = regress_normal_quadric(points, field, p, nbr[:s], True, quads[li])
+            st, h, misfit, d = regress_normal_quadric(points, field, p, nbr[:s], True,
+                                                      quads[li])
             if st == OK:
                 st, c1, c2, _, _, _ = curvature_from_quadric(quads[li], h, origin, FOOT_LIMIT)
         if st != OK or not supported(c1, c2, h):
@@ -440,6 +458,7 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out):
         out[li, 4] = h
         out[li, 5] = spread
         out[li, 6] = inflate
+        out[li, 7] = misfit
 
 
 @njit(cache=True)
@@ -559,33 +578,25 @@ def _least_error(est, sg, best, kinds, gamma):
 
 
 @njit(cache=True)
-def _witnesses(kinds, t_status, t_model, levels):
-    """Which smaller fit judges which in Lepski's rule: ``witness[c, r]``, shape (l + t, l + t).
+def _witnesses(est, kinds, t_status, t_model, levels):
+    """Which smaller fit judges which by agreement in Lepski's rule: ``witness[c, r]``, shape
+    (l + t, l + t), bool.
 
-    Every smaller fit judges a larger one, except that where the ladder has positional
-    (Monge) rungs, the normal-quadric rungs do not judge a top that kept the polynomial normal
-    field. That top kept it because the quadric misfits its patch, and the smaller quadrics
-    share that misfit: on a 10,000-point torus at 0.1 % noise (730 anchors, stage-1 normals)
-    the 96- and 192-point quadrics erred a median 3.9 and 6.0 of their standard errors, the
-    384-point top 0.8. The Monge rungs, which depend on no normal, still judge it. Measured
-    (docs/accuracy.md section 9, step 10): torus 0.5 to 10 % less error at 0.1 to 0.5 %
-    noise, the blade's sides 15 % less, the filleted box's faces 5 % more (k2 12 %); other
-    smooth shapes within 1 %. Without Monge rungs (the first pass, which only refines normals)
-    the quadrics are a top's only judges and keep judging: dropping them there too spread
-    fillet curvature onto the box's faces (0.10 -> 0.12) for little gain on the torus.
+    Every smaller fit judges a larger one, except a normal-quadric rung whose normals misfit
+    the quadric more than a top's polynomial normal field misfits them
+    (:data:`WITNESS_MISFIT`): that top kept the field because the quadric misfits its patch,
+    and where the quadric misfits the rung's smaller patch too, the rung's curvature carries
+    that misfit, not the top's bias. The growth test still counts the rung's sigma.
     """
     count = levels + t_status.shape[0]
     witness = np.ones((count, count), np.bool_)
-    positional = False
-    for li in range(levels):
-        positional = positional or kinds[li] != KIND_NORMAL_QUADRIC
-    if not positional:
-        return witness
     for t in range(t_status.shape[0]):
-        if t_status[t] == OK and t_model[t] == MODEL_FIELD:
-            for li in range(levels):
-                if kinds[li] == KIND_NORMAL_QUADRIC:
-                    witness[levels + t, li] = False
+        if t_status[t] != OK or t_model[t] != MODEL_FIELD:
+            continue
+        for li in range(levels):
+            if kinds[li] == KIND_NORMAL_QUADRIC and \
+                    est[li, 7] > WITNESS_MISFIT * est[levels + t, 7]:
+                witness[levels + t, li] = False
     return witness
 
 
@@ -633,7 +644,7 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
         nbr = indices[indptr[j]:indptr[j + 1]]
         full = nbr.shape[0]
         quads = np.empty((levels, N_QUAD))
-        est = np.empty((levels + ntop, 7))
+        est = np.empty((levels + ntop, 8))
         ladder_estimates(points, field, p, nbr, ladder, kinds, quads, est)
         # Every top's full fit (both models) into scratch rows; the kept one is copied out.
         t_coef = np.empty((ntop,) + coef.shape[1:])
@@ -657,7 +668,8 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
                 t_status[t] = -1
                 continue
             sub = nbr[:size:strides[t]]
-            fk1, fk2, fd, fh = nfr_anchor_fits_one(points, field, p, sub, nfr_ratio, t_coef[t],
+            fk1, fk2, fd, fh, fm = nfr_anchor_fits_one(points, field, p, sub, nfr_ratio,
+                                                       t_coef[t],
                                                    t_quad[t], t_frame[t], t, t_scale,
                                                    t_qscale, t_model, t_resid, t_status)
             if t_status[t] == OK and supported(fk1, fk2, fh):
@@ -665,6 +677,7 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
                 est[row, 1], est[row, 2], est[row, 3], est[row, 4] = fk1, fk2, fd, fh
                 est[row, 5] = fh
                 est[row, 6] = 1.0
+                est[row, 7] = fm
         sg = np.full(levels + ntop, np.inf)
         for li in range(levels + ntop):
             if est[li, 0] == 1.0:
@@ -672,7 +685,7 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
                 if li >= levels:
                     s = (s + strides[li - levels] - 1) // strides[li - levels]
                 sg[li] = scale_sigma(est[li, 3], est[li, 5], s, calib[li]) * est[li, 6]
-        witness = _witnesses(kinds, t_status, t_model, levels)
+        witness = _witnesses(est, kinds, t_status, t_model, levels)
         best = _lepski(est, sg, gamma, growth, levels, witness)
         if best < 0:  # nothing else usable: the noise-limited Monge rungs (ladder_estimates)
             for li in range(levels):

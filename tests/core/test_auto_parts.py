@@ -212,14 +212,14 @@ def test_rotated_box_keeps_its_region_errors(noisy_box):
         assert region_mean(cloud, other, region) <= 1.25 * before + 0.02
 
 
-def test_normal_quadric_rungs_do_not_judge_a_normal_field_top():
+def test_misfitting_normal_quadrics_do_not_judge_a_normal_field_top():
     # Rungs of the fit pass (24, 48 Monge, 96 ridge, 96 and 192 normal quadrics) and two
-    # tops. The quadric rungs read k1 10 standard errors off the tops (their own misfit on a
-    # surface no quadric follows, as on a torus's tube); the Monge rungs agree with the tops.
+    # tops that kept the polynomial normal field. The quadric rungs read k1 10 standard errors
+    # off the tops; the Monge rungs agree with the tops.
     kinds = np.array([r[1] for r in scale_selection.RUNGS["fit"]], np.int64)
     levels = kinds.shape[0]
     quadric = kinds == scale_selection.KIND_NORMAL_QUADRIC
-    est = np.zeros((levels + 2, 7))
+    est = np.zeros((levels + 2, 8))
     est[:, 0] = 1.0
     est[:, 1] = 1.0
     est[:levels, 1][quadric] = 1.2
@@ -227,14 +227,18 @@ def test_normal_quadric_rungs_do_not_judge_a_normal_field_top():
     t_status = np.zeros(2, np.int8)  # both tops OK
     field, quadric_top = np.zeros(2, np.int8), np.ones(2, np.int8)  # MODEL_FIELD, MODEL_QUADRIC
     gamma = scale_selection.DEFAULT_GAMMA
-    witness = scale_selection._witnesses(kinds, t_status, field, levels)
+    # The quadrics misfit their normals twice as much as the tops' field (a torus's tube):
+    # they are no judges of the tops, which are kept.
+    est[:levels, 7][quadric] = 2e-4
+    est[levels:, 7] = 1e-4
+    witness = scale_selection._witnesses(est, kinds, t_status, field, levels)
     assert not witness[levels:, :levels][:, quadric].any()
     assert witness[levels:, :levels][:, ~quadric].all() and witness[:levels].all()
     assert scale_selection._lepski(est, sg, gamma, 2.0, levels, witness) == levels + 1
-    # A top that kept the quadric shares the rungs' model: they judge it and turn it down.
-    witness = scale_selection._witnesses(kinds, t_status, quadric_top, levels)
-    assert witness.all()
-    assert scale_selection._lepski(est, sg, gamma, 2.0, levels, witness) < levels
-    # The first pass has no Monge rungs: its quadric rungs are the only judges and stay.
-    refine = np.array([r[1] for r in scale_selection.RUNGS["refine"]], np.int64)
-    assert scale_selection._witnesses(refine, t_status, field, refine.shape[0]).all()
+    # Quadrics that fit their normals better than the tops' field (a face beside a fillet
+    # the tops reach) judge them, and turn them down; so they do for tops that kept the quadric.
+    est[:levels, 7][quadric] = 0.5e-4
+    for model in (field, quadric_top):
+        witness = scale_selection._witnesses(est, kinds, t_status, model, levels)
+        assert witness.all()
+        assert scale_selection._lepski(est, sg, gamma, 2.0, levels, witness) < levels
