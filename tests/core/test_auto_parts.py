@@ -162,8 +162,9 @@ def test_outliers_leave_the_inliers_nearly_unchanged(noisy_box):
     cloud, res = noisy_box
     dirty = synthetic.filleted_box(noise=0.05, seed=1, outliers=0.01)
     res_dirty = curvature.estimate(dirty.points, normals=dirty.normals)
-    # measured: faces +11 % (k1) and 0 % (k2), fillets +9 % (k1), corners +8 % (k1) and +2 %
-    # (k2); issue 15 asks for at most 20 % (before the refits: faces +12 %, fillets +35 %)
+    # measured: faces +16 % (k1) and +1 % (k2), fillets +8 % (k1), corners +8 % (k1) and +2 %
+    # (k2); issue 15 asks for at most 20 % (stop 34: faces +11 %; before the refits: faces
+    # +12 %, fillets +35 %)
     assert region_mean(dirty, res_dirty, "face") <= 1.2 * region_mean(cloud, res, "face")
     assert region_mean(dirty, res_dirty, "face", "k2") <= 1.2 * region_mean(cloud, res, "face",
                                                                            "k2")
