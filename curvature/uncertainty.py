@@ -12,7 +12,12 @@ Where the standard errors come from (each from the fit that produced the value):
   selection sees: how far the kept fit's curvature lies from the smaller fits' beyond their
   own errors;
 - the default's clean branch (implicit quadrics, exact on quadrics): the model error its
-  residual implies, ``CLEAN_CALIBRATION * residual / h^2``; zero residual, zero error.
+  residual implies, ``CLEAN_CALIBRATION * residual / h^2``; zero residual, zero error;
+- the default, both branches, then: widened by how far the point's nearest neighbors'
+  curvatures lie from its own (:data:`NEIGHBOR_SPREAD_WEIGHT`): a point read from an
+  anchor's fit a cell away, or where the curvature changes fast (a fillet's edge, an
+  ellipsoid's tip), errs by more than the fit's own error, and there its neighbors, read
+  from other fits or at other places, disagree.
 
 A floor of :data:`STD_FLOOR` of the curvature itself stands for the discretisation error no
 residual shows (sampling, foot point).
@@ -22,8 +27,9 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["ANCHORED_MEAN_SHARE", "CLEAN_CALIBRATION", "FIT_CALIBRATION", "STD_FLOOR",
-           "THIN_NEIGHBORS", "UNCERTAIN_SHARE", "uncertain", "with_floor"]
+__all__ = ["ANCHORED_MEAN_SHARE", "CLEAN_CALIBRATION", "FIT_CALIBRATION",
+           "NEIGHBOR_SPREAD_WEIGHT", "STD_FLOOR", "THIN_NEIGHBORS", "UNCERTAIN_SHARE",
+           "uncertain", "with_floor"]
 
 #: Factor of the height-function covariance per fit model (benchmarks/uncertainty.py).
 FIT_CALIBRATION = {"monge": 1.0, "adaptive": 1.0, "implicit": 1.0, "nfr": 1.0}
@@ -31,6 +37,23 @@ FIT_CALIBRATION = {"monge": 1.0, "adaptive": 1.0, "implicit": 1.0, "nfr": 1.0}
 CLEAN_CALIBRATION = 7.0
 #: Standard error of H per unit of the anchored fits' error of k1 and k2.
 ANCHORED_MEAN_SHARE = 0.8
+#: The default's standard errors grow to ``hypot(std, NEIGHBOR_SPREAD_WEIGHT * spread)``,
+#: with ``spread`` the RMS difference of k1 (k2, H) between a point and its 7 nearest
+#: neighbors (:func:`curvature.fitting.uncertainty.add_neighbor_spread`). Calibrated by
+#: benchmarks/uncertainty.py (72 noisy cells of 9 shapes, 0.05 to 0.5 % noise, both noise
+#: models): share of cells with the k1 and k2 coverage of 2 standard errors within 90-98 %
+#: 24 % without it, 39 % with 1.5 and 1.75; share covering at least 90 % 29 %, 74 % and 81 %;
+#: Spearman >= 0.5 6 %, 12.5 % and 12.5 %. The spread counts the neighbors' noise too (a
+#: neighbor read from another anchor's fit differs by about sqrt 2 standard errors where the
+#: fits are unbiased); counting only the spread beyond both points' standard errors gave 35 %
+#: in band but 44-46 % covering at least 90 % (weights 1.5 and 2.5): the noise-calibrated
+#: standard errors alone under-cover. A spread beyond a linear trend of the neighbors'
+#: curvatures did worse still (18-36 % in band): where the curvature changes fast is where the
+#: fits err (the ellipsoid's k1 covered 0.58-0.79 that way, 0.96-0.99 with the plain spread).
+#: On the real scan bun000 the median standard error of k1 rises from 16 to 42 inside and
+#: from 30 to 52 at the range image's edges, and the share of points flagged uncertain from
+#: 25 to 66 % (docs/accuracy.md section 10).
+NEIGHBOR_SPREAD_WEIGHT = 1.75
 #: Relative floor of a standard error (share of max(|k1|, |k2|)).
 STD_FLOOR = 1e-9
 #: A point is uncertain when a standard error of k1 or k2 exceeds this share of its

@@ -21,7 +21,7 @@ from numba import njit, prange
 from .linalg import cholesky, solve_lower
 from .quadric import OK
 
-__all__ = ["MONGE_TERMS", "design_std"]
+__all__ = ["MONGE_TERMS", "add_neighbor_spread", "design_std"]
 
 #: Coefficients of the quadratic height function.
 MONGE_TERMS = 6
@@ -127,3 +127,50 @@ def design_std(points, query, indptr, indices, include_self, dir1, dir2, residua
         k1_std[j] = unit * _norm_solved(low, e_k1)
         k2_std[j] = unit * _norm_solved(low, e_k2)
         mean_std[j] = unit * _norm_solved(low, e_h)
+
+
+@njit(parallel=True, cache=True)
+def add_neighbor_spread(k1, k2, normals, graph, weight, k1_std, k2_std, mean_std):
+    """Widen each point's standard errors by how far its neighbors' curvatures lie from its
+    own, in place: ``std = hypot(std, weight * spread)`` with ``spread`` the RMS difference
+    over the neighbors with an estimate.
+
+    A neighbor whose normal points the other way is read with its curvatures negated and
+    swapped (the same surface seen from the other side), so the spread does not depend on how
+    the normals were oriented. Points without an estimate (NaN k1) keep their NaN.
+
+    Parameters
+    ----------
+    k1, k2 : ndarray, shape (n,)
+    normals : ndarray, shape (n, 3)
+    graph : ndarray, shape (n, g), int
+        Each point's nearest neighbors; the point itself, where listed, is skipped.
+    weight : float
+    k1_std, k2_std, mean_std : ndarray, shape (n,)
+        Standard errors, updated in place (only the point's own: the spread reads no
+        standard error).
+    """
+    n = k1.shape[0]
+    for i in prange(n):
+        if not np.isfinite(k1[i]):
+            continue
+        h = 0.5 * (k1[i] + k2[i])
+        s1, s2, sh = 0.0, 0.0, 0.0
+        count = 0
+        for c in range(graph.shape[1]):
+            j = graph[i, c]
+            if j == i or not (np.isfinite(k1[j]) and np.isfinite(k2[j])):
+                continue
+            a, b = k1[j], k2[j]
+            if (normals[i, 0] * normals[j, 0] + normals[i, 1] * normals[j, 1]
+                    + normals[i, 2] * normals[j, 2]) < 0.0:
+                a, b = -k2[j], -k1[j]
+            s1 += (a - k1[i]) ** 2
+            s2 += (b - k2[i]) ** 2
+            sh += (0.5 * (a + b) - h) ** 2
+            count += 1
+        if count == 0:
+            continue
+        k1_std[i] = np.hypot(k1_std[i], weight * np.sqrt(s1 / count))
+        k2_std[i] = np.hypot(k2_std[i], weight * np.sqrt(s2 / count))
+        mean_std[i] = np.hypot(mean_std[i], weight * np.sqrt(sh / count))

@@ -21,17 +21,21 @@ import numpy as np
 from ..bounds import diagonal
 from ..cloud import PointCloud
 from ..errors import ParameterError
+from ..estimators.auto import neighbor_rows
 from ..estimators.fixed import DEFAULT_CHUNK
 from ..fitting import FITS
+from ..fitting.uncertainty import add_neighbor_spread
 from ..memory import release_freed_memory
+from ..neighborhoods.kdtree import build_tree
 from ..orientation import (
+    ORIENT_K,
     apply_signs,
     signs_auto,
     signs_from_normals,
     signs_from_viewpoint,
 )
 from ..result import CurvatureResult
-from ..uncertainty import uncertain
+from ..uncertainty import NEIGHBOR_SPREAD_WEIGHT, uncertain
 from ..validation import as_faces, as_points, as_vectors
 from .attributes import carry_input, file_viewpoint, orientation_rule
 from .block import DERIVED, compute_block
@@ -167,6 +171,10 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
         t0 = time.perf_counter()
         orient(res, req.mode, s_normals, s_vp, graph)
         timings["orientation"] = time.perf_counter() - t0
+        if req.method == "auto":
+            t0 = time.perf_counter()
+            widen_by_neighbors(res, spts, graph, req.chunk_size)
+            timings["neighbor_spread"] = time.perf_counter() - t0
     # The Z-ordered copies are not needed past orientation (the result's points are replaced
     # by the input's): freed before the fields are reordered, when memory peaks.
     del graph, spts, s_normals, s_vp
@@ -221,6 +229,20 @@ def derive_fields(res: CurvatureResult, diagonal: float) -> None:
         np.multiply(k1, k2, out=res.gaussian[sl])
         res.uncertain[sl] = uncertain(k1, k2, res.k1_std[sl], res.k2_std[sl],
                                       res.neighbor_count[sl], res.status[sl], diagonal)
+
+
+def widen_by_neighbors(res: CurvatureResult, points: np.ndarray, graph, chunk_size: int) -> None:
+    """Widen the default's standard errors by its neighbors' disagreement, in place
+    (:data:`~curvature.uncertainty.NEIGHBOR_SPREAD_WEIGHT`).
+
+    ``graph`` (n, ORIENT_K), the orientation's neighbor rows where orientation "auto" made
+    them, else made here: the same nearest neighbors (each point first) whatever the mode.
+    """
+    if graph is None:
+        graph = np.empty((points.shape[0], ORIENT_K), np.int32)
+        neighbor_rows(points, build_tree(points), graph, chunk_size)
+    add_neighbor_spread(res.k1, res.k2, res.normals, graph, NEIGHBOR_SPREAD_WEIGHT,
+                        res.k1_std, res.k2_std, res.mean_std)
 
 
 def orient(res: CurvatureResult, mode: str, ref_normals, viewpoint, graph) -> None:

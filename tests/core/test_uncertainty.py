@@ -116,3 +116,37 @@ def test_cli_summary_prints_the_median_standard_error(tmp_path, capsys):
     res = curvature.io.read_result(tmp_path / "r.npz")
     assert f"k1 {np.nanmedian(res.k1_std):.4g}" in line
     assert "uncertain" in line
+
+
+def test_neighbor_spread_widens_only_where_neighbors_disagree():
+    from curvature.fitting.uncertainty import add_neighbor_spread
+
+    k1 = np.array([1.0, 1.0, -0.5, 3.0, np.nan])
+    k2 = np.array([0.5, 0.5, -1.0, 0.5, np.nan])
+    normals = np.array([[0, 0, 1], [0, 0, 1], [0, 0, -1], [0, 0, 1], [0, 0, 1]], float)
+    # point 0's neighbors: itself (skipped), 1 (equal), 2 (equal, seen from the other side),
+    # 4 (no estimate); point 3's: 0 and 1, which read k1 2 lower
+    graph = np.array([[0, 1, 2, 4], [1, 0, 2, 4], [2, 0, 1, 4], [3, 0, 1, 4], [4, 0, 1, 2]])
+    std = [np.full(5, 0.1) for _ in range(3)]
+    std[0][4] = std[1][4] = std[2][4] = np.nan
+    add_neighbor_spread(k1, k2, normals, graph, 1.5, *std)
+    assert np.allclose([s[:3] for s in std], 0.1)  # agreeing neighbors add nothing
+    assert std[0][3] == pytest.approx(np.hypot(0.1, 1.5 * 2.0))
+    assert std[1][3] == pytest.approx(0.1)
+    assert std[2][3] == pytest.approx(np.hypot(0.1, 1.5 * 1.0))  # H: 1.75 against 0.75
+    assert all(np.isnan(s[4]) for s in std)
+
+
+def test_default_standard_errors_do_not_depend_on_the_orientation_mode():
+    # the neighbor spread reads the orientation's neighbor rows with orientation "auto" and
+    # makes the same rows itself otherwise
+    cloud = synthetic.filleted_box(noise=0.1, seed=2)
+    given = curvature.estimate(cloud.points, normals=cloud.normals)
+    auto = curvature.estimate(cloud.points)
+    ok = given.status == 0
+    pair = np.sort(np.c_[given.k1_std, given.k2_std][ok], axis=1)
+    assert np.allclose(pair, np.sort(np.c_[auto.k1_std, auto.k2_std][ok], axis=1))
+    assert np.allclose(given.mean_std[ok], auto.mean_std[ok])
+    assert "neighbor_spread" in given.info["timings"]
+    knn = curvature.estimate(cloud.points, "knn", k=24, fit="monge", normals=cloud.normals)
+    assert "neighbor_spread" not in knn.info["timings"]  # the fixed methods' stay as fitted
