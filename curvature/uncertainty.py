@@ -42,7 +42,7 @@ ANCHORED_MEAN_SHARE = 0.8
 #: neighbors (:func:`curvature.fitting.uncertainty.add_neighbor_spread`). Calibrated by
 #: benchmarks/uncertainty.py (72 noisy cells of 9 shapes, 0.05 to 0.5 % noise, both noise
 #: models): share of cells with the k1 and k2 coverage of 2 standard errors within 90-98 %
-#: 24 % without it, 39 % with 1.5 and 1.75; share covering at least 90 % 29 %, 74 % and 81 %;
+#: 24 % without it, 39 % with 1.5 and 1.75; share covering at least 90 % 29 %, 74 % and 82 %;
 #: Spearman >= 0.5 6 %, 12.5 % and 12.5 %. The spread counts the neighbors' noise too (a
 #: neighbor read from another anchor's fit differs by about sqrt 2 standard errors where the
 #: fits are unbiased); counting only the spread beyond both points' standard errors gave 35 %

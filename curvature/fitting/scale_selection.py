@@ -668,10 +668,9 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
                 t_status[t] = -1
                 continue
             sub = nbr[:size:strides[t]]
-            fk1, fk2, fd, fh, fm = nfr_anchor_fits_one(points, field, p, sub, nfr_ratio,
-                                                       t_coef[t],
-                                                   t_quad[t], t_frame[t], t, t_scale,
-                                                   t_qscale, t_model, t_resid, t_status)
+            fk1, fk2, fd, fh, fm = nfr_anchor_fits_one(
+                points, field, p, sub, nfr_ratio, t_coef[t], t_quad[t], t_frame[t], t,
+                t_scale, t_qscale, t_model, t_resid, t_status)
             if t_status[t] == OK and supported(fk1, fk2, fh):
                 est[row, 0] = 1.0
                 est[row, 1], est[row, 2], est[row, 3], est[row, 4] = fk1, fk2, fd, fh
