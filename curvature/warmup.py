@@ -5,8 +5,10 @@ tiny clouds, serially and with two threads (the threaded kernels are separate fu
 every ``cache=True`` kernel is compiled for the argument types real runs give it and written to
 ``__pycache__`` next to its source. Later processes load the machine code from there in about a
 second instead of compiling for minutes. With a valid cache the whole run takes seconds, so it
-is safe to run at every install. Numba drops a file's cache entries when that file changes;
-running this again recompiles just those.
+is safe to run at every install. When the sources changed since the last complete run, every
+cached kernel is deleted first and compiled again (:func:`clear_stale_cache`): numba drops
+only the entries of the file that changed, and a kernel in another file compiled against it
+would keep the old code.
 
 A successful run leaves ``__pycache__/kernels.warm`` holding a fingerprint of the package's
 sources; :func:`cache_is_warm` compares it, so a caller (the service, the tests) can tell in
