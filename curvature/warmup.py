@@ -245,8 +245,6 @@ def run(report: Callable[[str], None] = print) -> list[str]:
     """
     started = time.perf_counter()
     cleared = clear_stale_cache()
-    if cleared:
-        report(f"sources changed since the last warm-up: {cleared} cached kernel files deleted")
     todo = list(steps())
     for i, (label, call) in enumerate(todo, 1):
         t0 = time.perf_counter()
@@ -259,6 +257,7 @@ def run(report: Callable[[str], None] = print) -> list[str]:
         except OSError as exc:  # a read-only install still works, it just cannot tell
             report(f"cannot record the warm cache in {STAMP}: {exc}")
     report(f"kernels ready in {time.perf_counter() - started:.1f} s"
+           + (f" ({cleared} stale cached kernel files deleted first)" if cleared else "")
            + (f"; never compiled: {', '.join(missing)}" if missing else ""))
     return missing
 

@@ -144,7 +144,9 @@ def add_neighbor_spread(k1, k2, normals, graph, weight, k1_std, k2_std, mean_std
     k1, k2 : ndarray, shape (n,)
     normals : ndarray, shape (n, 3)
     graph : ndarray, shape (n, g), int
-        Each point's nearest neighbors; the point itself, where listed, is skipped.
+        Each point's nearest neighbors, -1 padded (as
+        :func:`curvature.orientation.first_neighbors`); the point itself, where listed, is
+        skipped.
     weight : float
     k1_std, k2_std, mean_std : ndarray, shape (n,)
         Standard errors, updated in place (only the point's own: the spread reads no
@@ -159,7 +161,7 @@ def add_neighbor_spread(k1, k2, normals, graph, weight, k1_std, k2_std, mean_std
         count = 0
         for c in range(graph.shape[1]):
             j = graph[i, c]
-            if j == i or not (np.isfinite(k1[j]) and np.isfinite(k2[j])):
+            if j < 0 or j == i or not (np.isfinite(k1[j]) and np.isfinite(k2[j])):
                 continue
             a, b = k1[j], k2[j]
             if (normals[i, 0] * normals[j, 0] + normals[i, 1] * normals[j, 1]
