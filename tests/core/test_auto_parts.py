@@ -185,6 +185,22 @@ def test_thin_plate_faces_stay_flat():
     assert np.mean(worst(cloud, res)[face]) < 1.0
 
 
+@pytest.mark.parametrize("shape, seed", [("blade", 2), ("thin_plate", 1)])
+def test_thin_walls_keep_one_orientation_without_given_normals(shape, seed):
+    # Without normals the orientation joined the two sides through the wall (the thin plate's
+    # faces 3 spacings apart, the blade's trailing edge), flipping one side: half the points,
+    # and the blade's convex crest read k1 -1 instead of 1 (measured before: 0.50 and 0.49 of
+    # the points wrong; now 0.0010 and 0.0100, the plate's at its rims of 2 spacings).
+    cloud = synthetic.make(shape, noise=0.1, seed=seed)
+    res = curvature.estimate(cloud.points)
+    along = np.einsum("ij,ij->i", res.normals, cloud.normals)
+    ok = np.isfinite(along)
+    assert np.mean(along[ok] < 0) < 0.015
+    if shape == "blade":
+        crest = cloud.region_mask("crest") & cloud.interior
+        assert np.median(res.k1[crest]) == pytest.approx(1.0, abs=0.15)
+
+
 @pytest.mark.parametrize("change", ["order", "workers", "translate"])
 def test_part_results_do_not_depend_on_order_workers_or_position(noisy_box, change):
     cloud, res = noisy_box

@@ -10,6 +10,8 @@ from scipy.spatial import cKDTree
 
 from curvature import synthetic
 from curvature.orientation import (
+    CHORD_CAP,
+    CHORD_WEIGHT,
     ORIENT_K,
     forest_signs,
     reverse_edges,
@@ -25,16 +27,28 @@ def knn_graph(points, k=ORIENT_K):
 
 def forest(points, normals, graph):
     valid = np.isfinite(normals).all(axis=1)
-    parent, order, count = spanning_forest(graph, *reverse_edges(graph, valid), normals, valid)
+    parent, order, count = spanning_forest(points, graph, *reverse_edges(graph, valid),
+                                           normals, valid)
     return parent, order[:count], valid
 
 
-def scipy_mst_weight(normals, graph, valid):
+def edge_weights(points, normals, rows, cols):
+    """1 - |ni . nj| plus CHORD_WEIGHT |u . ni| |u . nj| (at most CHORD_CAP) of the unit
+    chord u, edge by edge."""
+    chord = points[cols] - points[rows]
+    chord /= np.linalg.norm(chord, axis=1)[:, None]
+    along = np.abs(np.einsum("ij,ij->i", chord, normals[rows]))
+    along *= np.abs(np.einsum("ij,ij->i", chord, normals[cols]))
+    parallel = np.abs(np.einsum("ij,ij->i", normals[rows], normals[cols]))
+    return 1.0 - parallel + np.minimum(CHORD_WEIGHT * along, CHORD_CAP)
+
+
+def scipy_mst_weight(points, normals, graph, valid):
     rows = np.repeat(np.arange(len(graph)), graph.shape[1])
     cols = graph.ravel()
     keep = valid[rows] & valid[cols]
     rows, cols = rows[keep], cols[keep]
-    w = 1.0 - np.abs(np.einsum("ij,ij->i", normals[rows], normals[cols])) + 1.0  # > 0: edges
+    w = edge_weights(points, normals, rows, cols) + 1.0  # > 0: scipy drops zero edges
     tree = minimum_spanning_tree(csr_matrix((w, (rows, cols)), shape=(len(graph),) * 2))
     return tree.sum() - tree.nnz, tree.nnz
 
@@ -52,8 +66,8 @@ def test_forest_is_a_minimum_spanning_forest(seed):
     position[order] = np.arange(len(order))
     child = order[parent[order] >= 0]
     assert np.all(position[parent[child]] < position[child])  # parents join first
-    weight = (1.0 - np.abs(np.einsum("ij,ij->i", normals[child], normals[parent[child]]))).sum()
-    expected, edges = scipy_mst_weight(normals, graph, valid)
+    weight = edge_weights(cloud.points, normals, child, parent[child]).sum()
+    expected, edges = scipy_mst_weight(cloud.points, normals, graph, valid)
     assert len(child) == edges
     assert weight == pytest.approx(expected, rel=1e-9, abs=1e-9)
 
@@ -109,3 +123,16 @@ def test_one_viewpoint_per_point():
     views[17] = np.nan
     with pytest.raises(ParameterError, match="viewpoint of point 17 is not finite"):
         curvature.estimate(cloud.points, "knn", viewpoint=views)
+
+
+@pytest.mark.parametrize("shape, seed", [("thin_plate", 1), ("thin_plate", 2), ("blade", 2)])
+def test_a_thin_wall_does_not_flip_one_side(shape, seed):
+    """Across a wall 2 to 3 spacings thick the two sides' normals are parallel up to sign, so
+    1 - |ni . nj| alone weighs an edge across it 0, and that one edge flipped a whole side of
+    these clouds (half their points). The chord's run along both normals weighs it up."""
+    cloud = synthetic.make(shape, seed=seed, noise=0.1)
+    ok = np.isfinite(cloud.normals).all(axis=1)
+    points, normals = cloud.points[ok], cloud.normals[ok]
+    flips = np.random.default_rng(seed).choice([-1.0, 1.0], len(points))
+    signs = signs_auto(points, normals * flips[:, None], knn_graph(points))
+    np.testing.assert_array_equal(signs, flips.astype(np.int8))
