@@ -94,12 +94,17 @@ MONGE_NOISE_LIMIT = 0.12
 #: 20,000 points; benchmarks/calibrate_scales.py), constant within about 15 % across shapes
 #: and noise; the Monge rungs' errors are larger than their residuals say because the fit sees
 #: few points per unknown. Pass 1 ("refine") only refines normals: Monge rungs would tilt them
-#: by their noisy curvature over a cell's width.
+#: by their noisy curvature over a cell's width. The 96-point circular rung (calibration 4.4
+#: to 5.5) keeps a positional fit in the ladder where a denser cloud makes the 48-point patch
+#: too small for its noise to show the normal fits' bias at corners and fillets: on a
+#: 24,000-point filleted box at 0.05 % noise the 48-point rung's standard error at a corner
+#: was 0.5 against 0.06 at 12,000 points, and the biased 192-point normal fits passed
+#: (corners 0.28 at 12,000 points, 0.75 at 24,000; with the rung 0.35 and 0.46).
 RUNGS = {
     "refine": ((96, KIND_NORMAL_QUADRIC, 1.9), (192, KIND_NORMAL_QUADRIC, 2.6)),
     "fit": ((24, KIND_MONGE_CIRCULAR, 6.7), (48, KIND_MONGE_CIRCULAR, 5.5),
-            (96, KIND_MONGE_RIDGE, 4.1), (96, KIND_NORMAL_QUADRIC, 1.9),
-            (192, KIND_NORMAL_QUADRIC, 2.6)),
+            (96, KIND_MONGE_RIDGE, 4.1), (96, KIND_MONGE_CIRCULAR, 5.0),
+            (96, KIND_NORMAL_QUADRIC, 1.9), (192, KIND_NORMAL_QUADRIC, 2.6)),
 }
 #: The default tops of each pass, ``(neighbors, calibration)``: full fits (both models)
 #: above the ladder. A top fits every ``stride``-th of its sorted neighbors, ``stride =
@@ -187,6 +192,12 @@ BORDER_SIDE = 0.5
 #: faces 5 to 14 %, and leaving them out of the growth test too spread fillet curvature over
 #: them (0.10 -> 0.13 to 0.22).
 WITNESS_MISFIT = 1.0
+#: Agreement a circular Monge rung needs with the next smaller one (not the 24-point rung), in
+#: combined standard errors: the smaller patch is part of the larger, so their noise is shared
+#: and gamma's tolerance (made for independent fits) let a 96-point rung that straddled a
+#: corner's edge pass against the 48-point one (a 12,000-point filleted box at 0.05 %: corners
+#: 0.28 -> 0.49 with the 96-point rung and gamma alone, 0.35 with this at 2).
+NESTED_AGREEMENT = 2.0
 
 
 def pass_rungs(k: int, stage: str, fallback: int | None = None) -> tuple[np.ndarray, ...]:
@@ -409,6 +420,7 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out):
     frame = np.empty((3, 3))
     scratch = np.empty((3, 3))  # the ridge rung's own frame, unused
     framed = False  # whether frame holds the directions of a circular Monge rung
+    below = -1  # the last circular Monge rung
     for li in range(ladder.shape[0]):
         out[li, 0] = 0.0
         out[li, 6] = 1.0
@@ -430,6 +442,12 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out):
         elif s >= nbr.shape[0]:
             continue
         elif kinds[li] != KIND_NORMAL_QUADRIC:
+            if kinds[li] == KIND_MONGE_CIRCULAR:
+                # Where the circular rung below (not the 24-point one) failed (a line, a
+                # cluster of duplicates), a wider one fits whatever else it reaches.
+                prev, below = below, li
+                if prev > 0 and out[prev, 0] == 0.0:
+                    continue
             rounds = CIRCULAR_ROUNDS if kinds[li] == KIND_MONGE_CIRCULAR else 0
             st, h, d, c1, c2, design, side = _monge_rung(points, field, p, nbr[:s],
                                                          quads[li], rounds, frame)
@@ -469,14 +487,16 @@ def _agree(est, sg, a, b, gamma):
 
 
 @njit(cache=True)
-def _lepski(est, sg, gamma, growth, first_top, witness):
+def _lepski(est, sg, gamma, growth, first_top, witness, nested):
     """Index of the fit to keep: the largest whose k1 and k2 agree with those of every smaller
     fit within ``gamma`` times the sum of both sigmas, and whose sigma is at most ``growth``
     times the smallest sigma below it (-1 when none is usable). A top above the first
     (index above ``first_top``) must also agree with the top just below it within
     :data:`TOP_AGREEMENT` times their combined sigma: the two fit the same model to nested
-    patches, so their noise is shared and a small difference already shows a bias. A fit r
-    judges a larger fit c only where ``witness[c, r]`` (:func:`_witnesses`).
+    patches, so their noise is shared and a small difference already shows a bias; so must a
+    circular Monge rung with the one below it (``nested``, :func:`nested_rungs`, within
+    :data:`NESTED_AGREEMENT`). A fit r judges a larger fit c only where ``witness[c, r]``
+    (:func:`_witnesses`).
 
     Each candidate is compared with every smaller rung directly, not with a running intersection, so
     one chance disagreement between two noisy small fits does not stop the selection at the smallest
@@ -505,6 +525,11 @@ def _lepski(est, sg, gamma, growth, first_top, witness):
         if agrees and c > first_top and np.isfinite(sg[c - 1]):
             tol = TOP_AGREEMENT * np.sqrt(sg[c] * sg[c] + sg[c - 1] * sg[c - 1])
             if abs(est[c, 1] - est[c - 1, 1]) > tol or abs(est[c, 2] - est[c - 1, 2]) > tol:
+                agrees = False
+        r = nested[c]
+        if agrees and r >= 0 and np.isfinite(sg[r]):
+            tol = NESTED_AGREEMENT * np.sqrt(sg[c] * sg[c] + sg[r] * sg[r])
+            if abs(est[c, 1] - est[r, 1]) > tol or abs(est[c, 2] - est[r, 2]) > tol:
                 agrees = False
         if agrees and sg[c] <= growth * smallest:
             return c
@@ -578,6 +603,24 @@ def _least_error(est, sg, best, kinds, gamma):
 
 
 @njit(cache=True)
+def nested_rungs(kinds, ntop):
+    """For each fit, the smaller fit of the same model over a part of its patch that it must
+    agree with within :data:`NESTED_AGREEMENT` combined standard errors in Lepski's rule (-1:
+    none): each circular Monge rung's next smaller one, but not the 24-point rung (chance
+    readings). Shape (l + t,), int64; the tops' own nesting is :data:`TOP_AGREEMENT`'s.
+    """
+    levels = kinds.shape[0]
+    nested = np.full(levels + ntop, -1, np.int64)
+    last = -1
+    for li in range(levels):
+        if kinds[li] == KIND_MONGE_CIRCULAR:
+            if last > 0:
+                nested[li] = last
+            last = li
+    return nested
+
+
+@njit(cache=True)
 def _witnesses(est, kinds, t_status, t_model, levels):
     """Which smaller fit judges which by agreement in Lepski's rule: ``witness[c, r]``, shape
     (l + t, l + t), bool.
@@ -639,6 +682,7 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
     """
     levels = ladder.shape[0]
     ntop = tops.shape[0]
+    nested = nested_rungs(kinds, ntop)
     for j in prange(anchors.shape[0]):
         p = anchors[j]
         nbr = indices[indptr[j]:indptr[j + 1]]
@@ -685,13 +729,13 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
                     s = (s + strides[li - levels] - 1) // strides[li - levels]
                 sg[li] = scale_sigma(est[li, 3], est[li, 5], s, calib[li]) * est[li, 6]
         witness = _witnesses(est, kinds, t_status, t_model, levels)
-        best = _lepski(est, sg, gamma, growth, levels, witness)
+        best = _lepski(est, sg, gamma, growth, levels, witness, nested)
         if best < 0:  # nothing else usable: the noise-limited Monge rungs (ladder_estimates)
             for li in range(levels):
                 if est[li, 0] == 2.0:
                     sg[li] = (scale_sigma(est[li, 3], est[li, 5], sizes[li], calib[li])
                               * est[li, 6])
-            best = _lepski(est, sg, gamma, growth, levels, witness)
+            best = _lepski(est, sg, gamma, growth, levels, witness, nested)
         if best > 0:
             best = _least_error(est, sg, best, kinds, gamma)
         # The top to report when nothing is usable: the largest that fitted, else the first
