@@ -261,3 +261,28 @@ def test_misfitting_normal_quadrics_do_not_judge_a_normal_field_top():
         witness = scale_selection._witnesses(est, kinds, t_status, model, levels)
         assert witness.all()
         assert scale_selection._lepski(est, sg, gamma, 2.0, levels, witness, nested) < levels
+
+
+def test_a_circular_rung_must_agree_closely_with_the_one_inside_it():
+    # The 96-point circular rung's patch holds the 48-point one, so their noise is shared: a
+    # difference of 3 combined standard errors passes gamma's tolerance (3.5 times the sum)
+    # but shows a bias (a patch straddling a corner's edge); the 48-point rung is kept.
+    kinds = np.array([r[1] for r in scale_selection.RUNGS["fit"]], np.int64)
+    levels = kinds.shape[0]
+    circular = np.flatnonzero(kinds == scale_selection.KIND_MONGE_CIRCULAR)
+    small, wide = circular[1], circular[2]  # the 48- and 96-point rungs
+    nested = scale_selection.nested_rungs(kinds, 0)
+    assert nested[wide] == small and nested[small] == -1 and nested[circular[0]] == -1
+    est = np.zeros((levels, 8))
+    sg = np.full(levels, np.inf)
+    est[:wide + 1, 0] = 1.0
+    sg[:wide + 1] = 0.1
+    est[:wide + 1, 1:3] = 5.0
+    est[wide, 2] = 5.0 - 3.0 * np.sqrt(2) * 0.1
+    witness = np.ones((levels, levels), np.bool_)
+    gamma = scale_selection.DEFAULT_GAMMA
+    others = [r for r in range(wide) if r != small]
+    sg[others] = np.inf  # only the two circular rungs are usable
+    assert scale_selection._lepski(est, sg, gamma, 2.0, levels, witness, nested) == small
+    est[wide, 2] = 5.0 - 1.0 * np.sqrt(2) * 0.1  # within the nested tolerance: kept
+    assert scale_selection._lepski(est, sg, gamma, 2.0, levels, witness, nested) == wide
