@@ -420,7 +420,7 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out):
     frame = np.empty((3, 3))
     scratch = np.empty((3, 3))  # the ridge rung's own frame, unused
     framed = False  # whether frame holds the directions of a circular Monge rung
-    below = -1  # the last circular Monge rung
+    nested = nested_rungs(kinds, 0)
     for li in range(ladder.shape[0]):
         out[li, 0] = 0.0
         out[li, 6] = 1.0
@@ -442,12 +442,10 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out):
         elif s >= nbr.shape[0]:
             continue
         elif kinds[li] != KIND_NORMAL_QUADRIC:
-            if kinds[li] == KIND_MONGE_CIRCULAR:
-                # Where the circular rung below (not the 24-point one) failed (a line, a
-                # cluster of duplicates), a wider one fits whatever else it reaches.
-                prev, below = below, li
-                if prev > 0 and out[prev, 0] == 0.0:
-                    continue
+            if nested[li] >= 0 and out[nested[li], 0] == 0.0:
+                # Where the circular rung inside it failed (a line, a cluster of
+                # duplicates), a wider one fits whatever else it reaches.
+                continue
             rounds = CIRCULAR_ROUNDS if kinds[li] == KIND_MONGE_CIRCULAR else 0
             st, h, d, c1, c2, design, side = _monge_rung(points, field, p, nbr[:s],
                                                          quads[li], rounds, frame)
