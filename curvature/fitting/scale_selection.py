@@ -69,13 +69,18 @@ CIRCULAR_ROUNDS = 3
 #: A circular Monge quadric over a patch stretched along a ridge: the points of the nearest
 #: RIDGE_POOL nearest to the anchor when distances along the smaller principal curvature's
 #: direction (of the last circular rung) count 1 / RIDGE_ASPECT. Across a fillet or a
-#: leading edge it is as narrow as the isotropic rung of half its points, so no more biased
-#: where the curvature ends at the ridge's sides, with twice the points: on a blade's leading
-#: edge (k = 20, radius 3.7 spacings, 0.1 % noise) 96 points of 384 read 0.77 (mean of the
-#: larger of the k1 and k2 errors) where the isotropic 48-point rung reads 1.15 and the
-#: 96-point one 2.4; longer patches (144 points, aspect 3) gain little (0.73).
+#: leading edge it is as narrow as the isotropic rung of a quarter of its points, so no more
+#: biased where the curvature ends at the ridge's sides, with four times the points. Its
+#: quadric is held in units of that width, and its support (|k| h <= SUPPORT) judged by it: a
+#: patch's length along a straight ridge bounds no curvature. At aspect 2 (stop 31 to 36; as
+#: narrow as the 48-point rung) the rung read a leading edge of 2.6 spacings' radius (the
+#: bench's blade, 10,000 points, k = 20, 0.1 % noise) 18.2 like the 48-point rung, whose
+#: patch wraps about 85 degrees each way and onto the flat sides; at aspect 4 20.4, mean of
+#: the larger of the k1 and k2 errors 0.81 (24-point rung: 20.4 and 1.83, its noise). Its
+#: calibration (RUNGS) stays 4.1: at aspect 4 benchmarks/calibrate_scales.py measures 2.9 to
+#: 4.1, and 3.5 cost the sphere and the Bezier patch up to 5 % for 2 to 4 % on the fillets.
 KIND_MONGE_RIDGE = 3
-RIDGE_ASPECT = 2.0
+RIDGE_ASPECT = 4.0
 #: A ridge rung is fitted only where the last circular rung's smaller curvature is at most
 #: this share of the larger: on a corner sphere its direction is arbitrary and a stretched
 #: patch reaches into the fillets (a filleted box's corners: 0.45 -> 0.89 without the test).
@@ -165,11 +170,12 @@ FOOT_LIMIT = 2.0
 DESIGN_ISOTROPIC = np.sqrt(18.0)
 DESIGN_SLACK = 1.6
 #: The same for a ridge rung's patch, stretched RIDGE_ASPECT times along the ridge: median
-#: over random 96-point ellipses of that aspect 10.8 (99.5th percentile 15.2; cut along the
-#: ridge by a border, 38). Its slack is lower: with DESIGN_SLACK the border's ridge rungs still
-#: erred a median 1.54 of their standard errors (p99 6.4) against 1.24 inside; with
-#: RIDGE_DESIGN_SLACK 1.24 (p99 5.0), as inside.
-DESIGN_RIDGE = 10.8
+#: over random 96-point ellipses of that aspect 37.0 (99.5th percentile 52.1; cut along the
+#: ridge by a border, 133; at aspect 2: 10.9, 14.6 and 39). Its slack is lower: with
+#: DESIGN_SLACK the border's ridge rungs still erred a median 1.54 of their standard errors
+#: (p99 6.4) against 1.24 inside; with RIDGE_DESIGN_SLACK 1.24 (p99 5.0), as inside (both
+#: measured at aspect 2).
+DESIGN_RIDGE = 37.0
 RIDGE_DESIGN_SLACK = 1.25
 #: Only a patch whose points lie to one side of the anchor (:func:`one_sided` above this; a
 #: half-disk's is 0.85, an inner 48-point patch's rarely above 0.45) is taken for one cut by
@@ -396,6 +402,19 @@ def _ridge_patch(points, p, nbr, count, frame):
 
 
 @njit(cache=True)
+def _to_unit(quad, h, unit):
+    """Rescale a packed quadric (:data:`N_QUAD`) held in coordinates of unit ``h`` to unit
+    ``unit``, in place; returns ``unit``. F is defined up to scale, so the quadratic terms
+    scale by (unit / h)^2 and the linear ones by unit / h."""
+    ratio = unit / h
+    for q in range(6):
+        quad[q] *= ratio * ratio
+    for q in range(6, 9):
+        quad[q] *= ratio
+    return unit
+
+
+@njit(cache=True)
 def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out):
     """Every rung's fit at one anchor (rungs not smaller than the full list are skipped).
 
@@ -411,10 +430,10 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out):
     out : ndarray, shape (l, 8)
         Output per rung: ok (1; 2 for a Monge rung over the noise limit,
         :data:`MONGE_NOISE_LIMIT`; 0 for none), k1, k2, residual distance, h (the quadric's
-        unit), the spread its standard error uses (h, but the width across the ridge for a
-        ridge rung), the factor its standard error grows by where its patch is cut by
-        the cloud's border (isotropic Monge rungs, :data:`DESIGN_SLACK`; else 1) and the
-        normal misfit of a normal-quadric rung (0 for the others).
+        unit: for a ridge rung its width across the ridge), the spread its standard error
+        uses (h), the factor its standard error grows by where its patch is cut by
+        the cloud's border (Monge rungs, :data:`DESIGN_SLACK` or :data:`RIDGE_DESIGN_SLACK`;
+        else 1) and the normal misfit of a normal-quadric rung (0 for the others).
     """
     origin = np.zeros(3)
     frame = np.empty((3, 3))
@@ -439,6 +458,8 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out):
                                                          CIRCULAR_ROUNDS, scratch)
             if side > BORDER_SIDE:
                 inflate = max(1.0, design / (RIDGE_DESIGN_SLACK * DESIGN_RIDGE))
+            if st == OK and spread > 0.0:
+                h = _to_unit(quads[li], h, spread)
         elif s >= nbr.shape[0]:
             continue
         elif kinds[li] != KIND_NORMAL_QUADRIC:

@@ -58,10 +58,9 @@ def test_points_beside_small_fits_fit_around_themselves(noisy_box, monkeypatch):
 
 
 def test_ridge_rungs_follow_fillets_and_leading_edges(noisy_box, monkeypatch):
-    # a patch stretched along the fillet, as narrow across it as the 48-point rung with twice
-    # its points (measured fillets 0.187 with it, 0.226 without, 0.289 before the 96-point
-    # circular rung; the blade's leading edge at 0.1 %, k = 20: 1.57 and 1.89, 1.67 and 2.40
-    # before it)
+    # a patch stretched along the fillet, as narrow across it as the 24-point rung with four
+    # times its points (measured fillets 0.177 with it, 0.226 without; 0.187 at aspect 2,
+    # stop 36; the blade's leading edge at 0.1 %, k = 20: 1.43 and 1.89; 1.57 at aspect 2)
     cloud, res = noisy_box
     blade = synthetic.blade(noise=0.1, seed=1)
     with_ridge = curvature.estimate(blade.points, normals=blade.normals)
@@ -73,6 +72,36 @@ def test_ridge_rungs_follow_fillets_and_leading_edges(noisy_box, monkeypatch):
     plain_blade = curvature.estimate(blade.points, normals=blade.normals)
     assert (region_mean(blade, plain_blade, "leading_edge")
             > 1.12 * region_mean(blade, with_ridge, "leading_edge"))
+
+
+def test_a_ridge_rung_is_judged_by_its_width_not_its_length():
+    # a cylinder of 2.6 spacings' radius: the 96-point patch stretched along its axis is about
+    # 8 spacings long, so |k| times its RMS distance exceeds SUPPORT, though the rung reads the
+    # curvature across it well (width about 2 spacings); noise-free it reads 1.03 for 1
+    spacing = 1.0 / 2.6
+    height = 40.0
+    n = int(round(2.0 * np.pi * height / spacing ** 2))
+    cyl = synthetic.cylinder(n, radius=1.0, height=height, seed=3)
+    p = int(np.argmin(np.abs(cyl.points[:, 2])))
+    order = np.argsort(np.linalg.norm(cyl.points - cyl.points[p], axis=1))
+    nbr = order[1:385].astype(np.int64)
+    ladder = np.array([48, 96], np.int64)
+    kinds = np.array([scale_selection.KIND_MONGE_CIRCULAR, scale_selection.KIND_MONGE_RIDGE],
+                     np.int64)
+    quads = np.empty((2, 10))
+    out = np.empty((2, 8))
+    scale_selection.ladder_estimates(cyl.points, cyl.normals, p, nbr, ladder, kinds, quads,
+                                     out)
+    assert out[1, 0] == 1.0  # admitted
+    np.testing.assert_allclose(sorted(np.abs(out[1, 1:3])), [0.0, 1.0], atol=0.05)
+    width = out[1, 5]
+    assert width < 2.5 * spacing and out[1, 4] == width  # its quadric is held in that unit
+    # the quadric reads the same curvature in that unit (as the scale selection stores it)
+    from curvature.fitting.normal_quadric import curvature_from_quadric
+    st, c1, c2 = curvature_from_quadric(quads[1], out[1, 4], np.zeros(3), 2.0)[:3]
+    assert st == 0
+    np.testing.assert_allclose(sorted(np.abs([c1, c2])), sorted(np.abs(out[1, 1:3])),
+                               atol=1e-9)
 
 
 def test_the_scale_is_chosen_per_point(noisy_box):
