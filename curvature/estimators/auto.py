@@ -17,8 +17,11 @@ On noisy scans the neighborhood size decides the error far more than the fit mod
    ``nfr_ratio`` times the quadric's), the cubic normal field (20 unknowns; follows surfaces that
    are no quadric at this scale, such as a torus's inner side). Every point reads its curvature
    off its cell anchor's model at its own position. A second pass, same size, fits the normals
-   of the first. Anchors cut the work of the large fits about thirteenfold at no measured loss
-   of accuracy; the second pass lowers the error further (torus at 0.5 % noise: 0.035 -> 0.026).
+   of the first. The first reads the normals at the cloud's border at their PCA
+   neighborhoods' centroids, where such a normal belongs
+   (:mod:`curvature.fitting.border_shift`). Anchors cut the work of the large fits about
+   thirteenfold at no measured loss of accuracy; the second pass lowers the error further
+   (torus at 0.5 % noise: 0.035 -> 0.026).
    On clouds of fewer than ``k / max_share`` points ``k`` is lowered (:meth:`AutoRun.fit_k`).
 4. **Scale per anchor** (:mod:`curvature.fitting.scale_selection`): beside the fit over ``k``
    neighbors, each anchor fits nested prefixes of its neighbor list (Monge quadrics over 24 and
@@ -53,6 +56,7 @@ from scipy.spatial import cKDTree
 
 from ..bounds import bounding_box, diagonal
 from ..fitting import scale_selection
+from ..fitting.border_shift import border_offsets
 from ..fitting.kernels import FIT_IMPLICIT, FIT_MONGE, SOLVER_TAUBIN, fit_batch
 from ..fitting.normal_field import (
     N_TERMS,
@@ -617,6 +621,11 @@ class AutoRun:
         self.track_reach = track_reach
         self.reach: np.ndarray | None = None
         self.outliers = np.zeros(points.shape[0], bool)
+        # Points whose stage-1 normal belongs elsewhere (the cloud's border) and the offsets
+        # the first pass reads them at (curvature.fitting.border_shift); none on a dense
+        # cloud's thinned share, whose normals come from the whole cloud.
+        self.shift_rows = np.empty(0, np.int64)
+        self.shifts = np.empty((0, 3))
         # RMS neighbor distance of each clean fit (its standard error's unit)
         self.clean_h = np.empty(points.shape[0]) if self.plan.clean else None
 
@@ -721,6 +730,7 @@ class AutoRun:
         r_normal = np.empty(n)
         r_fit = np.empty(n) if self.plan.clean else None
         r_isolation = np.empty(n)
+        rows, shifts = [np.empty(0, np.int64)], [np.empty((0, 3))]
         for sl in self._chunks(n):
             query = np.arange(sl.start, sl.stop, dtype=np.int64)
             indptr, indices, d2 = knn_csr(self.points, self.tree, query, k)
@@ -731,24 +741,36 @@ class AutoRun:
             pca_normals(self.points, query, *_prefix_csr(nbr, normal_k), field[sl])
             off_surface(self.points, query, np.ascontiguousarray(nbr[:, :normal_k]), field[sl],
                         self.plan.spacing, self.outliers[sl])
+            if not self.plan.clean:
+                offsets = np.empty((query.shape[0], 3))
+                border_offsets(self.points, query, nbr[:, :normal_k], field[sl], r_normal[sl],
+                               offsets)
+                moved = np.flatnonzero(np.any(offsets != 0.0, axis=1))
+                rows.append(query[moved])
+                shifts.append(offsets[moved])
             r_isolation[sl] = np.sqrt(d2[:, min(ISOLATION_K, k) - 1])
             if self.plan.clean:
                 self._clean_fits(res, sl, query, nbr, d2, kp)
                 r_fit[sl] = np.sqrt(d2[:, kp - 1])
             self._tick(2 * (sl.stop - sl.start) if self.plan.clean else sl.stop - sl.start)
         isolated(self.points, self.tree, r_isolation, self.outliers)
-        self._normals_without_outliers(field, r_normal, normal_k)
+        renormalled = self._normals_without_outliers(field, r_normal, normal_k)
+        # Offsets of normals refitted without outliers, or of outliers, would not match.
+        rows, shifts = np.concatenate(rows), np.concatenate(shifts)
+        keep = ~self.outliers[rows] & ~np.isin(rows, renormalled)
+        self.shift_rows, self.shifts = rows[keep], shifts[keep]
         return field, (r_normal, r_fit)
 
-    def _normals_without_outliers(self, field, r_normal, normal_k) -> None:
+    def _normals_without_outliers(self, field, r_normal, normal_k) -> np.ndarray:
         """Stage-1 normals again, without the outliers, where one was among the neighbors.
 
         One outlier a spacing off a face tilts the PCA normals of every point that has it among
         its ``normal_k`` neighbors, and the normal fits then read that tilt as curvature.
+        Returns the rows whose normals were refitted (int64).
         """
         out = np.flatnonzero(self.outliers)
         if out.size == 0:
-            return
+            return np.empty(0, np.int64)
         d, _ = cKDTree(self.points[out]).query(self.points, k=1,
                                                 workers=numba.get_num_threads())
         hit = np.flatnonzero((d <= r_normal) & ~self.outliers).astype(np.int64)
@@ -767,6 +789,7 @@ class AutoRun:
             field[rows] = normals
             last = np.where(use, np.sqrt(d2), 0.0).max(axis=1)
             r_normal[rows] = np.maximum(r_normal[rows], last)
+        return hit
 
     def _clean_fits(self, res, sl, query, nbr, d2, kp) -> None:
         """Implicit quadrics of a chunk of a clean cloud, written to ``res`` rows ``sl``.
@@ -1073,8 +1096,9 @@ class AutoRun:
             # Pass 1 only refines normals: Monge rungs would tilt them by their noisy curvature
             # over a cell's width, so its ladder has the normal-fit rungs only.
             anchors = reps if wanted is None or not last else reps[wanted]
-            fits, fit_reach, chosen, err = self._fit_anchors(anchors, field, kc, w,
-                                                             positional=last)
+            fits, fit_reach, chosen, err = self._fit_anchors(
+                anchors, field, kc, w, positional=last,
+                positions=None if last else self._pass1_positions(reps))
             if not last:
                 # Refined normals of every point: the first pass's field at the point; the
                 # outliers stay out (a normal given at an off-surface position would bend
@@ -1087,6 +1111,18 @@ class AutoRun:
             name = "pass2" if last else "pass1"
             self.timings[name] = self.timings.get(name, 0.0) + time.perf_counter() - t0
         return fits, fit_reach, chosen, err, w
+
+    def _pass1_positions(self, reps):
+        """Where the first pass reads each stage-1 normal: the points, with the border's
+        normals moved to their neighborhoods' centroids (:mod:`curvature.fitting.border_shift`;
+        None where none moves). The anchors stay: each fit's coordinates, and the reading of
+        its model at every point of the cell, are taken from the anchor's own position."""
+        moved = ~np.isin(self.shift_rows, reps)
+        if not moved.any():
+            return None
+        positions = self.points.copy()
+        positions[self.shift_rows[moved]] += self.shifts[moved]
+        return positions
 
     def _fallback(self, res, field, r_normal, reps, owner, k, failed) -> None:
         """One anchored pass over ``k`` neighbors on the stage-1 normals, for failed points.
@@ -1114,10 +1150,12 @@ class AutoRun:
         d = np.linalg.norm(self.points - self.points[reps[owner]], axis=1)
         return d + fit_reach[owner] + np.sqrt(3.0) * self.plan.cell
 
-    def _fit_anchors(self, anchors, field, k, w, positional: bool = True):
+    def _fit_anchors(self, anchors, field, k, w, positional: bool = True, positions=None):
         """Fits at ``anchors`` over up to ``k`` neighbors, the size chosen per anchor
         (:mod:`curvature.fitting.scale_selection`; every anchor uses ``k`` when
-        ``scale_gamma`` is 0). ``positional`` includes the Monge rungs of the ladder.
+        ``scale_gamma`` is 0). ``positional`` includes the Monge rungs of the ladder;
+        ``positions`` (n, 3), if given, are where the normal fits read each point's normal
+        (neighbors are still found at the points).
 
         Returns
         -------
@@ -1155,7 +1193,8 @@ class AutoRun:
             indptr, indices, d2 = knn_csr(self.points, self.tree, anchors[sl], k)
             arrays = (coef[sl], scale[sl], frame[sl], quad[sl], quad_scale[sl], model[sl],
                       resid[sl], status[sl])
-            multiscale_anchor_fits(self.points, field, anchors[sl], indptr, indices,
+            multiscale_anchor_fits(self.points if positions is None else positions, field,
+                                   anchors[sl], indptr, indices,
                                    self.params["nfr_ratio"], ladder, kinds, tops, strides,
                                    gamma,
                                    scale_selection.SIGMA_GROWTH, calib,
