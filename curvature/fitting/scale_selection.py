@@ -542,14 +542,10 @@ def _lepski(est, sg, gamma, growth, first_top, witness, nested):
                 agrees = False
                 break
         if agrees and c > first_top and np.isfinite(sg[c - 1]):
-            tol = TOP_AGREEMENT * np.sqrt(sg[c] * sg[c] + sg[c - 1] * sg[c - 1])
-            if abs(est[c, 1] - est[c - 1, 1]) > tol or abs(est[c, 2] - est[c - 1, 2]) > tol:
-                agrees = False
+            agrees = _pair_bias(est, sg, c, c - 1, TOP_AGREEMENT) == 0.0
         r = nested[c]
         if agrees and r >= 0 and np.isfinite(sg[r]):
-            tol = NESTED_AGREEMENT * np.sqrt(sg[c] * sg[c] + sg[r] * sg[r])
-            if abs(est[c, 1] - est[r, 1]) > tol or abs(est[c, 2] - est[r, 2]) > tol:
-                agrees = False
+            agrees = _pair_bias(est, sg, c, r, NESTED_AGREEMENT) == 0.0
         if agrees and sg[c] <= growth * smallest:
             return c
     return -1
