@@ -57,7 +57,7 @@ def rung_errors(cloud, anchors: int, normal_k: int = 48, seed: int = 0):
         for t, size in enumerate(tops):
             stride = max(1, size // TOP_POINTS)
             sub = nbr[:size:stride]
-            fk1, fk2, fd, fh, fm = nfr_anchor_fits_one(pts, field, p, sub, 0.7, coef, quad,
+            fk1, fk2, fd, fh, fm, _ = nfr_anchor_fits_one(pts, field, p, sub, 0.7, coef, quad,
                                                        frame, 0, one[0], one[1], one[2],
                                                        one[3], one[4])
             est[levels + t] = (1.0 if one[4][0] == 0 else 0.0, fk1, fk2, fd, fh, fh, 1.0, fm)

@@ -180,14 +180,17 @@ def regress_normals(points, field, p, nbr, include_self, coef):
         Mean squared residual of the fitted tangent normal components (about the squared
         angle between each normal and the field; compared with the normal-constrained
         quadric's misfit to choose between the two models).
+    round_residual : float
+        RMS height of the fitted points above the biconic of the fitted shape operator
+        (:func:`_biconic_rms`): the shape a sphere or a cylinder would leave.
     """
     m = nbr.shape[0] + (1 if include_self else 0)
     n_p = field[p]
     t1, t2 = tangent_basis(np.array([1.0, 0.0, 0.0]))
     if m < MIN_POINTS_NFR:
-        return TOO_FEW, 0.0, t1, t2, np.nan, np.nan
+        return TOO_FEW, 0.0, t1, t2, np.nan, np.nan, np.nan
     if not np.all(np.isfinite(n_p)):
-        return DEGENERATE, 0.0, t1, t2, np.nan, np.nan
+        return DEGENERATE, 0.0, t1, t2, np.nan, np.nan, np.nan
     t1, t2 = tangent_basis(n_p)
     # Tangent coordinates, tangent normal components (neighbor normals flipped to agree with
     # p's) and heights of the fitted points, one row per quantity so the sums below run over
@@ -215,10 +218,10 @@ def regress_normals(points, field, p, nbr, include_self, coef):
         hgt[ok_pts] = dx * nx + dy * ny + dz * nz
         ok_pts += 1
     if ok_pts < MIN_POINTS_NFR:
-        return TOO_FEW, 0.0, t1, t2, np.nan, np.nan
+        return TOO_FEW, 0.0, t1, t2, np.nan, np.nan, np.nan
     h = np.sqrt((dot(uv[0], uv[0], ok_pts) + dot(uv[1], uv[1], ok_pts)) / ok_pts)
     if not h > 0.0:
-        return DEGENERATE, 0.0, t1, t2, np.nan, np.nan
+        return DEGENERATE, 0.0, t1, t2, np.nan, np.nan, np.nan
     # The design matrix by columns (one monomial per row of `cols`): its Gram matrix is then
     # dot products of contiguous vectors.
     cols = np.empty((N_TERMS, ok_pts))
@@ -234,7 +237,7 @@ def regress_normals(points, field, p, nbr, include_self, coef):
             ata[c, r] = ata[r, c]
     l, good = cholesky(ata, 1e-12)
     if not good:
-        return DEGENERATE, h, t1, t2, np.nan, np.nan
+        return DEGENERATE, h, t1, t2, np.nan, np.nan, np.nan
     beta0 = solve_upper_t(l, solve_lower(l, atg[:, 0].copy()))
     beta1 = solve_upper_t(l, solve_lower(l, atg[:, 1].copy()))
     for r in range(N_TERMS):
@@ -261,7 +264,50 @@ def regress_normals(points, field, p, nbr, include_self, coef):
             r0[i] -= b0 * cols[r, i]
             r1[i] -= b1 * cols[r, i]
     mis = dot(r0, r0, ok_pts) + dot(r1, r1, ok_pts)
-    return OK, h, t1, t2, np.sqrt(dot(dev, dev, ok_pts) / ok_pts), mis / ok_pts
+    # (the Hessian of the paraboloid's height is -2 [[s11, s12 / 2], [s12 / 2, s22]])
+    round_rms = _biconic_rms(uv, hgt, ok_pts, -2.0 * s11, -s12, -2.0 * s22)
+    return (OK, h, t1, t2, np.sqrt(dot(dev, dev, ok_pts) / ok_pts), mis / ok_pts,
+            round_rms)
+
+
+@njit(cache=True)
+def _biconic_rms(uv, hgt, m, k11, k12, k22):
+    """RMS height of points above the biconic of a shape operator, about their mean.
+
+    The biconic ``w = (k1 a^2 + k2 b^2) / (1 + sqrt(1 - k1^2 a^2 - k2^2 b^2))``, with (a, b)
+    the tangent coordinates along the principal directions, is the sphere or the cylinder
+    itself where the curvatures make one, and the paraboloid ``(k1 a^2 + k2 b^2) / 2`` to
+    second order. Over a patch that wraps far around a tube (a torus's, 0.7 of its radius
+    each way) a paraboloid misses the points by its slope alone, far above the noise; this
+    misses them by what the curvature's change and the noise leave.
+
+    Parameters
+    ----------
+    uv : ndarray, shape (2, >= m)
+        Tangent coordinates.
+    hgt : ndarray, shape (>= m,)
+        Heights along the normal.
+    m : int
+        Points used (the first m).
+    k11, k12, k22 : float
+        The height's Hessian (shape operator) in the tangent coordinates.
+
+    Returns
+    -------
+    float
+    """
+    ka, kb, ex, ey = eigen2(k11, k12, k22)
+    dev = np.empty(m)
+    for i in range(m):
+        a = uv[0, i] * ex + uv[1, i] * ey
+        b = uv[1, i] * ex - uv[0, i] * ey
+        # (beyond the sphere's reach the root is cut at 0: the height of its equator)
+        root = np.sqrt(max(1.0 - ka * ka * a * a - kb * kb * b * b, 0.0))
+        dev[i] = hgt[i] - (ka * a * a + kb * b * b) / (1.0 + root)
+    mean = total(dev, m) / m
+    for i in range(m):
+        dev[i] -= mean
+    return np.sqrt(dot(dev, dev, m) / m)
 
 
 @njit(cache=True)
@@ -335,7 +381,7 @@ def nfr_batch(points, stage1, query, indptr, indices, include_self,
         coef = np.empty((2, N_TERMS))  # per iteration: a buffer shared by threads would race
         clear_outputs(j, k1, k2, residual, normals, dir1, dir2)
         p = query[j]
-        st, h, t1, t2, res, _ = regress_normals(points, stage1, p,
+        st, h, t1, t2, res, _, _ = regress_normals(points, stage1, p,
                                                 indices[indptr[j]:indptr[j + 1]],
                                                 include_self, coef)
         if st != OK:
@@ -412,8 +458,12 @@ def nfr_anchor_fits_one(points, field, p, nbr, nfr_ratio, coef_j, quad_j, frame_
     misfit : float
         The kept model's mean squared residual of the fitted normals (about the squared
         angle between each normal and the model's).
+    shape_distance : float
+        What of ``distance`` a shape of the fitted curvature does not explain: for the
+        normal field its RMS distance to the biconic, not the paraboloid
+        (:func:`regress_normals`); for the quadric ``distance`` itself.
     """
-    st, h, t1, t2, res, mis = regress_normals(points, field, p, nbr, True, coef_j)
+    st, h, t1, t2, res, mis, round_res = regress_normals(points, field, p, nbr, True, coef_j)
     qst, qh, qmis, qres = regress_normal_quadric(points, field, p, nbr, True, quad_j)
     scale[j] = h
     quad_scale[j] = qh
@@ -427,20 +477,20 @@ def nfr_anchor_fits_one(points, field, p, nbr, nfr_ratio, coef_j, quad_j, frame_
         residual[j] = qres
         fst, c1, c2, _, _, _ = curvature_from_quadric(quad_j, qh, np.zeros(3), FOOT_LIMIT)
         if fst != OK:
-            return np.nan, np.nan, qres, qh, qmis
-        return c1, c2, qres, qh, qmis
+            return np.nan, np.nan, qres, qh, qmis, qres
+        return c1, c2, qres, qh, qmis, qres
     model[j] = MODEL_FIELD
     status[j] = st
     residual[j] = res
     if st != OK:
-        return np.nan, np.nan, res, qh, mis
+        return np.nan, np.nan, res, qh, mis, round_res
     # Scratch outputs of one row: curvature_from_field writes into result arrays.
     k1o, k2o = np.empty(1), np.empty(1)
     vecs = np.empty((3, 1, 3))
     if not curvature_from_field(coef_j, h, field[p], t1, t2, 0.0, 0.0, 0, k1o, k2o, vecs[0],
                                 vecs[1], vecs[2]):
-        return np.nan, np.nan, res, qh, mis
-    return k1o[0], k2o[0], res, qh, mis
+        return np.nan, np.nan, res, qh, mis, round_res
+    return k1o[0], k2o[0], res, qh, mis, round_res
 
 
 @njit(parallel=True, cache=True)

@@ -282,14 +282,14 @@ def test_misfitting_normal_quadrics_do_not_judge_a_normal_field_top():
     assert not witness[levels:, :levels][:, quadric].any()
     assert witness[levels:, :levels][:, ~quadric].all() and witness[:levels].all()
     nested = scale_selection.nested_rungs(kinds, 2)
-    assert scale_selection._lepski(est, sg, gamma, 2.0, levels, witness, nested) == levels + 1
+    assert scale_selection._lepski(est, sg, sg, gamma, 2.0, levels, witness, nested) == levels + 1
     # Quadrics that fit their normals better than the tops' field (a face beside a fillet
     # the tops reach) judge them, and turn them down; so they do for tops that kept the quadric.
     est[:levels, 7][quadric] = 0.5e-4
     for model in (field, quadric_top):
         witness = scale_selection._witnesses(est, kinds, t_status, model, levels)
         assert witness.all()
-        assert scale_selection._lepski(est, sg, gamma, 2.0, levels, witness, nested) < levels
+        assert scale_selection._lepski(est, sg, sg, gamma, 2.0, levels, witness, nested) < levels
 
 
 def test_a_circular_rung_must_agree_closely_with_the_one_inside_it():
@@ -312,6 +312,6 @@ def test_a_circular_rung_must_agree_closely_with_the_one_inside_it():
     gamma = scale_selection.DEFAULT_GAMMA
     others = [r for r in range(wide) if r != small]
     sg[others] = np.inf  # only the two circular rungs are usable
-    assert scale_selection._lepski(est, sg, gamma, 2.0, levels, witness, nested) == small
+    assert scale_selection._lepski(est, sg, sg, gamma, 2.0, levels, witness, nested) == small
     est[wide, 2] = 5.0 - 1.0 * np.sqrt(2) * 0.1  # within the nested tolerance: kept
-    assert scale_selection._lepski(est, sg, gamma, 2.0, levels, witness, nested) == wide
+    assert scale_selection._lepski(est, sg, sg, gamma, 2.0, levels, witness, nested) == wide

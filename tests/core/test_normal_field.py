@@ -98,3 +98,31 @@ def test_pca_normals_are_the_smallest_principal_axis_bit_for_bit():
         else:
             assert np.isnan(out[i]).all(), i
     assert np.isnan(out[2000:]).all(axis=1).all()  # the line and the duplicates
+
+
+@pytest.mark.parametrize("shape", ["sphere", "cylinder"])
+def test_round_residual_is_what_a_sphere_or_cylinder_leaves(shape):
+    # A patch wrapping 50 degrees around a unit sphere or cylinder with exact normals: the
+    # paraboloid of the fitted shape operator misses its points by its slope alone, the
+    # biconic not at all (the growth test of the scale selection reads the latter).
+    from curvature.fitting.normal_field import regress_normals
+
+    rng = np.random.default_rng(3)
+    theta = np.radians(50.0) * np.sqrt(rng.random(400))
+    phi = rng.random(400) * 2.0 * np.pi
+    if shape == "sphere":
+        normals = np.column_stack([np.sin(theta) * np.cos(phi), np.sin(theta) * np.sin(phi),
+                                   np.cos(theta)])
+        points = normals.copy()
+    else:
+        angle = theta * np.cos(phi)
+        normals = np.column_stack([np.sin(angle), np.zeros(400), np.cos(angle)])
+        points = normals + np.column_stack([np.zeros(400), theta * np.sin(phi), np.zeros(400)])
+    points = np.vstack([[0.0, 0.0, 1.0], points])
+    normals = np.vstack([[0.0, 0.0, 1.0], normals])
+    coef = np.empty((2, 10))
+    st, h, _, _, paraboloid, _, round_rms = regress_normals(
+        points, normals, 0, np.arange(1, 401), True, coef)
+    assert st == 0
+    assert paraboloid > 3e-3 * h
+    assert round_rms < 1e-3 * paraboloid
