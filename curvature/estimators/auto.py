@@ -71,7 +71,7 @@ from ..memory import release_freed_memory
 from ..neighborhoods.kdtree import build_tree, knn_parallel
 from ..params import ParamSpec
 from ..status import Status
-from ..uncertainty import ANCHORED_MEAN_SHARE, CLEAN_CALIBRATION, with_floor
+from ..uncertainty import ANCHORED_MEAN_SHARE, BIAS_CROSS, CLEAN_CALIBRATION, with_floor
 from .sampling import cell_ijk, grid_keys, thinned
 
 # Neighbors of the spacing and noise measurements and of the clean-cloud fit.
@@ -1174,9 +1174,9 @@ class AutoRun:
             ``k`` neighbors q (the chosen fit uses a subset of them).
         chosen : ndarray, shape (a,), int64
             Neighbors of each anchor's kept fit.
-        err : ndarray, shape (a,)
-            Standard error of the kept fit's k1 and k2: its calibrated noise error and the
-            bias the smaller fits show, combined (inf where no fit was usable).
+        err : ndarray, shape (a, 2)
+            Standard errors of the kept fit's k1 and k2: its calibrated noise error and the
+            bias the smaller fits show in each, combined (inf where no fit was usable).
         """
         a = anchors.shape[0]
         coef = np.empty((a, 2, N_TERMS))
@@ -1187,7 +1187,7 @@ class AutoRun:
         status = np.empty(a, np.int8)
         reach = np.empty(a) if self.track_reach else None
         chosen = np.full(a, k, np.int64)
-        sigma, bias = np.empty(a), np.empty(a)
+        sigma, bias = np.empty(a), np.empty((a, 2))
         gamma = self.params["scale_gamma"]
         ladder, kinds, tops, strides, calib = scale_selection.pass_rungs(
             k, "fit" if positional else "refine", self.share_k())
@@ -1211,7 +1211,8 @@ class AutoRun:
                 nbr = indices.reshape(-1, k)
                 reach[sl] = np.maximum((np.sqrt(d2) + w[nbr]).max(axis=1), w[anchors[sl]])
             self._tick(sl.stop - sl.start)
-        err = np.hypot(sigma, bias)
+        # each curvature's own bias, and a share of the other's (BIAS_CROSS)
+        err = np.hypot(sigma[:, None], np.hypot(bias, BIAS_CROSS * bias[:, ::-1]))
         return (coef, scale, frame, quad, quad_scale, model, resid, status), reach, chosen, err
 
     def _refined_field(self, field, anchors, owner, fits):
@@ -1261,8 +1262,8 @@ class _OutputView:
             self.arrays = tuple(a[mask] for a in self.arrays)
 
     def store(self, neighbor_count, std=None) -> None:
-        """Copy the rows into the result; ``std`` (m,) is the standard error of their k1 and
-        k2 (the rows keep theirs when not given)."""
+        """Copy the rows into the result; ``std`` (m, 2) holds the standard errors of their
+        k1 and k2 (the rows keep theirs when not given); H's is a share of the larger."""
         r = self.rows
         k1, k2, normals, dir1, dir2, residual, status = self.arrays
         self.res.k1[r], self.res.k2[r], self.res.residual[r], self.res.status[r] = \
@@ -1270,11 +1271,12 @@ class _OutputView:
         self.res.normals[r], self.res.dir1[r], self.res.dir2[r] = normals, dir1, dir2
         self.res.neighbor_count[r] = neighbor_count
         if std is not None:
-            std = with_floor(np.where(status == Status.OK, std, np.nan), k1, k2,
-                             self.floor_scale)
-            self.res.k1_std[r] = std
-            self.res.k2_std[r] = std
-            self.res.mean_std[r] = ANCHORED_MEAN_SHARE * std
+            ok = status == Status.OK
+            std1 = with_floor(np.where(ok, std[:, 0], np.nan), k1, k2, self.floor_scale)
+            std2 = with_floor(np.where(ok, std[:, 1], np.nan), k1, k2, self.floor_scale)
+            self.res.k1_std[r] = std1
+            self.res.k2_std[r] = std2
+            self.res.mean_std[r] = ANCHORED_MEAN_SHARE * np.maximum(std1, std2)
 
 
 __all__ = ["AUTO_PARAMS", "AutoPlan", "AutoRun", "grid_cells", "plan_auto", "plan_sample"]

@@ -570,12 +570,19 @@ def _pair_bias(est, sg, best, r, z):
 
 
 @njit(cache=True)
-def _bias(est, sg, best, extrapolate=True):
+def _pair_bias_of(est, sg, best, r, z, col):
+    """:func:`_pair_bias` of one principal curvature (``col`` 1: k1, 2: k2)."""
+    slack = z * np.sqrt(sg[r] * sg[r] + sg[best] * sg[best])
+    return max(0.0, abs(est[best, col] - est[r, col]) - slack)
+
+
+@njit(cache=True)
+def _bias(est, sg, best, extrapolate=True, col=0):
     """Bias of fit ``best`` from its disagreement with the smaller usable fits beyond their
     errors; ``extrapolate``d to zero size: a bias growing as h^2 (the first term a quadric
     cannot follow) differs between patches of h_b and h_r by (1 - h_r^2 / h_b^2) of the wider
     one's, so a difference with the next smaller fit (half the points, h^2 halved) is half
-    of it."""
+    of it. ``col`` 0 reads the larger of the k1 and k2 disagreements, 1 and 2 one of them."""
     out = 0.0
     hb = est[best, 5] * est[best, 5]
     for r in range(best):
@@ -585,7 +592,9 @@ def _bias(est, sg, best, extrapolate=True):
         if extrapolate:
             share = 1.0 - est[r, 5] * est[r, 5] / hb if hb > 0.0 else 1.0
             grow = 1.0 / max(share, BIAS_SHARE_MIN)
-        out = max(out, grow * _pair_bias(est, sg, best, r, BIAS_SLACK))
+        shown = (_pair_bias(est, sg, best, r, BIAS_SLACK) if col == 0
+                 else _pair_bias_of(est, sg, best, r, BIAS_SLACK, col))
+        out = max(out, grow * shown)
     return out
 
 
@@ -701,9 +710,9 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
         strided tops included.
     sigma : ndarray, shape (a,)
         Output: the kept fit's standard error of curvature (inf when none was usable).
-    bias : ndarray, shape (a,)
-        Output: the kept fit's bias as the smaller fits show it: the largest excess of
-        ``|k_kept - k_r|`` (k1 or k2) over ``BIAS_SLACK`` times their combined standard
+    bias : ndarray, shape (a, 2)
+        Output: the kept fit's bias of k1 and of k2 as the smaller fits show it: the largest
+        excess of ``|k_kept - k_r|`` over ``BIAS_SLACK`` times their combined standard
         errors, over every usable smaller rung r (0 when none disagrees).
     """
     levels = ladder.shape[0]
@@ -790,11 +799,12 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
         residual[j], status[j] = t_resid[keep], t_status[keep]
         chosen[j] = sizes[levels + keep]
         sigma[j] = np.inf
-        bias[j] = 0.0
+        bias[j, 0] = bias[j, 1] = 0.0
         if best < 0:
             continue  # nothing usable: the largest top's status stands
         sigma[j] = sg[best]
-        bias[j] = _bias(est, sg, best)
+        bias[j, 0] = _bias(est, sg, best, True, 1)
+        bias[j, 1] = _bias(est, sg, best, True, 2)
         if best < levels:
             chosen[j] = ladder[best]
             for r in range(N_QUAD):
