@@ -315,3 +315,29 @@ def test_a_circular_rung_must_agree_closely_with_the_one_inside_it():
     assert scale_selection._lepski(est, sg, sg, gamma, 2.0, levels, witness, nested) == small
     est[wide, 2] = 5.0 - 1.0 * np.sqrt(2) * 0.1  # within the nested tolerance: kept
     assert scale_selection._lepski(est, sg, sg, gamma, 2.0, levels, witness, nested) == wide
+
+
+def test_a_rung_no_less_noisy_than_a_smaller_one_is_turned_down():
+    # Every fit agrees; the 96-point normal quadric's sigma is 1.5 times the smallest below
+    # it: twice the points, or normals, and no smaller sigma shows a misfit (RUNG_GROWTH), so
+    # the fit below is kept. A top may grow up to SIGMA_GROWTH (2) times.
+    kinds = np.array([r[1] for r in scale_selection.RUNGS["fit"]], np.int64)
+    levels = kinds.shape[0]
+    est = np.zeros((levels + 1, 8))
+    est[:, 0] = 1.0
+    est[:, 1:3] = 1.0
+    sg = np.full(levels + 1, 0.1)
+    witness = np.ones((levels + 1, levels + 1), np.bool_)
+    nested = scale_selection.nested_rungs(kinds, 1)
+    gamma = scale_selection.DEFAULT_GAMMA
+    quadric = int(np.flatnonzero(kinds == scale_selection.KIND_NORMAL_QUADRIC)[0])
+    sg[quadric:levels] = 0.15  # the quadric rungs, and the top at 0.1
+    assert scale_selection.RUNG_GROWTH < 1.5 < scale_selection.SIGMA_GROWTH
+    kept = scale_selection._lepski(est, sg, sg, gamma, 2.0, levels, witness, nested)
+    assert kept == levels  # the top (sigma 0.1) is kept
+    sg[levels] = np.inf  # without the top, the quadric rungs are turned down
+    assert scale_selection._lepski(est, sg, sg, gamma, 2.0, levels, witness, nested) < quadric
+    sg[quadric:levels] = 0.1  # as noisy as the smaller rungs: kept
+    assert scale_selection._lepski(est, sg, sg, gamma, 2.0, levels, witness, nested) == levels - 1
+    sg[levels] = 0.15  # a top 1.5 times as noisy passes
+    assert scale_selection._lepski(est, sg, sg, gamma, 2.0, levels, witness, nested) == levels
