@@ -30,8 +30,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .linalg import cholesky, solve_lower, solve_upper_t
-from .quadric import tangent_basis_xyz
+from .kernels import fit_monge, gather_local, principal_axes, spans_surface
+from .quadric import gradient_at
 
 __all__ = ["SHIFT_FROM", "SHIFT_RAMP", "border_offsets", "centroid_normals"]
 
@@ -89,9 +89,9 @@ def centroid_normals(points, query, nbr, normals, out):
     fits: where a PCA normal is read at its centroid (:func:`border_offsets`) it should be
     the tangent plane's there, and a one-sided PCA plane is not even that. Over a half-disk
     of a cylinder, cut across its axis, the patch narrows around the tube away from the
-    point, so its mean height changes along the axis and the plane tilts along it; a height
-    ``c + b . u + u' A u`` in coordinates about the centroid carries that change in ``A`` and
-    leaves ``b``, the slope at the centroid.
+    point, so its mean height changes along the axis and the plane tilts along it; the height
+    quadric of the Monge fits (:func:`~curvature.fitting.kernels.fit_monge`) carries that change
+    in its quadratic terms, and its slope at the centroid is the tangent plane's there.
 
     Parameters
     ----------
@@ -100,59 +100,32 @@ def centroid_normals(points, query, nbr, normals, out):
     nbr : ndarray, shape (m, k), int
         The PCA neighbors (the query point not listed; it takes part).
     normals : ndarray, shape (m, 3)
-        The PCA normals (the fits' frames; the results keep their sides).
+        The PCA normals: the results keep their sides (NaN stays NaN).
     out : ndarray, shape (m, 3)
         Output unit normals; the PCA normal where the fit is degenerate.
     """
-    k = nbr.shape[1]
     for j in prange(query.shape[0]):
         n0, n1, n2 = normals[j, 0], normals[j, 1], normals[j, 2]
         out[j, 0], out[j, 1], out[j, 2] = n0, n1, n2
         if not (np.isfinite(n0) and np.isfinite(n1) and np.isfinite(n2)):
             continue
-        a0, a1, a2, b0, b1, b2 = tangent_basis_xyz(n0, n1, n2)
-        m = k + 1
-        local = np.empty((m, 3))
-        q = query[j]
-        for i in range(m):
-            r = q if i == 0 else nbr[j, i - 1]
-            x = points[r, 0] - points[q, 0]
-            y = points[r, 1] - points[q, 1]
-            z = points[r, 2] - points[q, 2]
-            local[i, 0] = x * a0 + y * a1 + z * a2
-            local[i, 1] = x * b0 + y * b1 + z * b2
-            local[i, 2] = x * n0 + y * n1 + z * n2
-        # About the centroid, in units of the patch's RMS radius (conditioning only).
-        for t in range(3):
-            mean = 0.0
-            for i in range(m):
-                mean += local[i, t]
-            mean /= m
-            for i in range(m):
-                local[i, t] -= mean
-        ss = 0.0
-        for i in range(m):
-            ss += local[i, 0] * local[i, 0] + local[i, 1] * local[i, 1]
-        unit = np.sqrt(ss / m)
-        if not unit > 0.0:
+        # The height quadric of the Monge fits, in the patch's PCA frame; its gradient at
+        # the centroid is that of h(u, v) - w there (no w^2 term without the correction).
+        xs, scale = gather_local(points, query[j], nbr[j], True)
+        if not scale > 0.0:
             continue
-        gram = np.zeros((6, 6))
-        rhs = np.zeros(6)
-        row = np.empty(6)
-        for i in range(m):
-            u, v = local[i, 0] / unit, local[i, 1] / unit
-            row[0], row[1], row[2], row[3], row[4], row[5] = 1.0, u, v, u * u, u * v, v * v
-            for r in range(6):
-                rhs[r] += row[r] * local[i, 2] / unit
-                for c in range(6):
-                    gram[r, c] += row[r] * row[c]
-        lower, ok = cholesky(gram, 1e-10)
+        w, axes = principal_axes(xs)
+        if not spans_surface(w):
+            continue
+        a, b, _, ok = fit_monge(xs, axes, 0)
         if not ok:
             continue
-        coef = solve_upper_t(lower, solve_lower(lower, rhs))
-        s0, s1 = coef[1], coef[2]  # the height's slope at the centroid
-        c0 = n0 - s0 * a0 - s1 * b0
-        c1 = n1 - s0 * a1 - s1 * b1
-        c2 = n2 - s0 * a2 - s1 * b2
-        norm = np.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
-        out[j, 0], out[j, 1], out[j, 2] = c0 / norm, c1 / norm, c2 / norm
+        centroid = np.zeros(3)
+        for i in range(xs.shape[0]):
+            for t in range(3):
+                centroid[t] += xs[i, t]
+        g = gradient_at(a, b, centroid / xs.shape[0])
+        norm = np.sqrt(g[0] * g[0] + g[1] * g[1] + g[2] * g[2])
+        if g[0] * n0 + g[1] * n1 + g[2] * n2 < 0.0:
+            norm = -norm
+        out[j, 0], out[j, 1], out[j, 2] = g[0] / norm, g[1] / norm, g[2] / norm

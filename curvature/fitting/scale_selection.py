@@ -576,17 +576,17 @@ def _lepski(est, sg, grow, gamma, growth, first_top, witness, nested):
 
 
 @njit(cache=True)
-def _pair_bias(est, sg, best, r, z):
-    """Disagreement of fit ``best`` with fit ``r`` beyond ``z`` times their combined errors."""
+def _pair_bias(est, sg, best, r, z, col=0):
+    """Disagreement of fit ``best`` with fit ``r`` beyond ``z`` times their combined errors: of
+    the larger of k1's and k2's (``col`` 0), or of k1's (1) or k2's (2) alone."""
     slack = z * np.sqrt(sg[r] * sg[r] + sg[best] * sg[best])
-    return max(0.0, abs(est[best, 1] - est[r, 1]) - slack, abs(est[best, 2] - est[r, 2]) - slack)
-
-
-@njit(cache=True)
-def _pair_bias_of(est, sg, best, r, z, col):
-    """:func:`_pair_bias` of one principal curvature (``col`` 1: k1, 2: k2)."""
-    slack = z * np.sqrt(sg[r] * sg[r] + sg[best] * sg[best])
-    return max(0.0, abs(est[best, col] - est[r, col]) - slack)
+    d1 = abs(est[best, 1] - est[r, 1]) - slack
+    d2 = abs(est[best, 2] - est[r, 2]) - slack
+    if col == 1:
+        return max(0.0, d1)
+    if col == 2:
+        return max(0.0, d2)
+    return max(0.0, d1, d2)
 
 
 @njit(cache=True)
@@ -605,9 +605,7 @@ def _bias(est, sg, best, extrapolate=True, col=0):
         if extrapolate:
             share = 1.0 - est[r, 5] * est[r, 5] / hb if hb > 0.0 else 1.0
             grow = 1.0 / max(share, BIAS_SHARE_MIN)
-        shown = (_pair_bias(est, sg, best, r, BIAS_SLACK) if col == 0
-                 else _pair_bias_of(est, sg, best, r, BIAS_SLACK, col))
-        out = max(out, grow * shown)
+        out = max(out, grow * _pair_bias(est, sg, best, r, BIAS_SLACK, col))
     return out
 
 
