@@ -28,8 +28,8 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["ANCHORED_MEAN_SHARE", "BIAS_CROSS", "CLEAN_CALIBRATION", "FIT_CALIBRATION",
-           "NEIGHBOR_SPREAD_WEIGHT", "STD_FLOOR", "THIN_NEIGHBORS", "UNCERTAIN_SHARE",
-           "uncertain", "with_floor"]
+           "NEIGHBOR_SPREAD_WEIGHT", "REFINED_AGAIN_SIGMA", "STD_FLOOR", "THIN_NEIGHBORS",
+           "UNCERTAIN_SHARE", "uncertain", "with_floor"]
 
 #: Factor of the height-function covariance per fit model (benchmarks/uncertainty.py).
 FIT_CALIBRATION = {"monge": 1.0, "adaptive": 1.0, "implicit": 1.0, "nfr": 1.0}
@@ -45,6 +45,11 @@ ANCHORED_MEAN_SHARE = 0.8
 #: 32 / 83 / 11 %, 0.5 33 / 83 / 15 %, 0.25 32 / 79 / 22 %, 0 33 / 75 / 28 % (the filleted box
 #: and cylinder rank their points in every cell, the sphere's k2 under-covers, 0.86).
 BIAS_CROSS = 0.5
+#: The default's calibrated sigma of a second-pass fit (section 8's ``sigma_s``) reads the
+#: RMS distance of the fit's points to its surface, which refining the normals it fits a
+#: second time (AutoRun._refine_again) leaves as it was, while their errors fall: this share
+#: of it counts where the anchor's normals were refined again (measured below).
+REFINED_AGAIN_SIGMA = 0.85
 #: The default's standard errors grow to ``hypot(std, NEIGHBOR_SPREAD_WEIGHT * spread)``,
 #: with ``spread`` the RMS difference of k1 (k2, H) between a point and its 7 nearest
 #: neighbors (:func:`curvature.fitting.uncertainty.add_neighbor_spread`). Calibrated by

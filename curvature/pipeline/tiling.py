@@ -52,11 +52,13 @@ from .threads import numba_threads
 # The default's first halo, in radii of its largest fit: the median distance to the k-th
 # neighbor on the plan's sample, over sqrt(dense_share) where the fits see a thinned share
 # (k thinned points cover k / share). Its second pass reads normals the first pass fitted over
-# as many neighbors: the largest reach measured was 4.2 radii (1M-point torus, 0.1 % noise),
-# 4.3 and 4.5 (3M and 10M points, thinned to 0.18 and 0.16). A halo of 16 spacings made every
-# tile of those run twice; one in spacings (the 24th neighbor) is too wide on dense noisy
-# clouds, whose spacing the noise inflates (1.9 times at 10M points).
-AUTO_HALO = 5.5
+# as many neighbors, refined again by a pass as wide away from features: the largest reach
+# measured was 7.0 radii (1M-point torus, 0.1 % noise), 6.3 at 100k points, 5.9 and 6.2 at 1M
+# and 3M points thinned to 0.10 and 0.13 (4.2 to 4.5 before the second refinement, with a
+# halo of 5.5). A halo of 16 spacings made every tile of those run twice; one in spacings (the
+# 24th neighbor) is too wide on dense noisy clouds, whose spacing the noise inflates (1.9
+# times at 10M points).
+AUTO_HALO = 8.5
 HALO_MARGIN = 1.5
 GROWTH = 1.5
 # Tiles handed to an executor at once: keeps every worker busy while bounding the memory of

@@ -7,7 +7,7 @@ import pytest
 
 import curvature
 from curvature import synthetic
-from curvature.estimators.auto import AutoPlan, grid_cells, plan_auto
+from curvature.estimators.auto import AutoPlan, AutoRun, grid_cells, plan_auto
 from curvature.neighborhoods.kdtree import build_tree
 
 
@@ -245,6 +245,19 @@ def test_a_torus_at_low_noise_keeps_its_wide_fits():
     e1, e2 = mean_errors(cloud, res)
     assert np.mean(res.neighbor_count[cloud.interior] <= 192) < 0.2
     assert 0.5 * (e1 + e2) < 0.0155
+
+
+def test_normals_refined_again_lower_a_smooth_patchs_error(monkeypatch):
+    """Away from features the first pass's normals are refined once more before the second
+    pass fits them (mean of the k1 and k2 errors, Bezier patch at 0.1 % view noise: 0.0093
+    with one refinement, 0.0078 with two)."""
+    cloud = synthetic.make("bezier", 10_000, noise=0.1, noise_model="view", seed=1)
+    res = curvature.estimate(cloud.points, normals=cloud.normals)
+    assert "refine again" in res.info["timings"]
+    monkeypatch.setattr(AutoRun, "_refine_again",
+                        lambda self, field, w, reps, *args: (w, np.zeros(reps.size, bool)))
+    once = curvature.estimate(cloud.points, normals=cloud.normals)
+    assert np.mean(mean_errors(cloud, res)) < 0.9 * np.mean(mean_errors(cloud, once))
 
 
 def test_plan_measures_spacing_and_noise():
