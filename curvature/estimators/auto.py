@@ -86,16 +86,18 @@ PLAN_K = 24
 AUTO_PARAMS = (
     # k is the largest neighborhood; its floor is the smallest fit auto makes anyway (the
     # clean-cloud fit and the first scale rung), so every k it accepts is honoured as given.
-    ParamSpec("k", int, 768, PLAN_K, 4096,
+    ParamSpec("k", int, 1536, PLAN_K, 4096,
               help="largest neighborhood of the curvature fits on noisy clouds, both passes: "
-                   "the fits over 24, 48, 96, 192 and 384 neighbors below k compete with the "
-                   "one over k (scale_gamma); fits above 384 use every (size // 384)-th "
-                   "neighbor; at least 24, the clean-cloud fit's size; lowered on small "
-                   "clouds (max_share)"),
+                   "the fits over 24, 48, 96, 192, 384 and 768 neighbors below k compete with "
+                   "the one over k (scale_gamma); fits above 384 use every (size // 384)-th "
+                   "neighbor; at least 24, the clean-cloud fit's size; at most 768 on clouds "
+                   "whose relative noise is below wide_noise; lowered on small clouds "
+                   "(max_share)"),
     ParamSpec("normal_k", int, 48, 12, 256, help="neighbors of the stage-1 PCA normals"),
     ParamSpec("max_share", float, 0.04, 0.0, 1.0,
               help="share of the cloud's points that bounds the fits on small clouds: k is "
-                   "lowered to at most twice max(48, max_share * points), and a fit over "
+                   "lowered to at most twice max(48, max_share * points) (four times on clouds "
+                   "of 9,600 points and more noisier than wide_noise), and a fit over "
                    "max(48, max_share * points) neighbors is among the candidates"),
     ParamSpec("nfr_ratio", float, 0.7, 0.0, 1e6,
               help="the cubic normal field replaces the normal-constrained quadric at an anchor "
@@ -109,6 +111,11 @@ AUTO_PARAMS = (
               help="relative noise above which the fits see the means of grid cells of the "
                    "cloud instead of its points, so a denser scan covers a larger patch with "
                    "the same neighbors (large: never)"),
+    ParamSpec("wide_noise", float, 0.05, 0.0, 1e6,
+              help="relative noise below which the fits stop at 768 neighbors whatever k: "
+                   "above it k is honoured, up to 4 times max_share of clouds of 9,600 points "
+                   "and more (0: k everywhere; not on dense clouds, whose fits see a thinned "
+                   "share)"),
     ParamSpec("noise_threshold", float, 0.001, 0.0, 1.0,
               help="relative noise (RMS residual of cubic fits over 24 neighbors / spacing) "
                    "below which a cloud counts as clean and gets the implicit quadric over 24 "
@@ -152,6 +159,18 @@ DENSE_GAMMA_SCALE = 5.0 / 3.5
 SHARE_MIN_K = 48
 # The largest fit covers at most this many times max_share of the cloud.
 SHARE_TOPS = 2
+# Below wide_noise the fits stop at QUIET_K neighbors; above it k (default 1536) is honoured,
+# covering at most WIDE_SHARE_TOPS times max_share of clouds of WIDE_MIN_POINTS and more
+# (1536 is 16 % of 9,600 points): the bias of a wider fit is below the noise of the narrower
+# ones there, and Lepski's rule turns it down at features. 10,000 points, seeds 1 and 2, ratio
+# to the best CGAL jet (docs/accuracy.md section 8): Bezier patch at 0.2 to 0.5 % 0.51-0.57 ->
+# 0.45-0.50, sphere and cylinder 31 to 55 % less error, ellipsoid up to 11 % less, torus
+# unchanged. At 0.1 % (relative noise 0.03-0.04; the part shapes at 0.05-0.1 % read
+# 0.008-0.039) the 1536 top's bias hides below its interval but not below its error: the
+# Bezier patch's band within 0.05-0.1 of its border (one-sided patches) 0.017 -> 0.024.
+QUIET_K = 768
+WIDE_SHARE_TOPS = 4
+WIDE_MIN_POINTS = 9600
 # Clean clouds: smaller implicit fits tried where the 24-neighbor one is not exact, the
 # residual (relative to spacing) below which a fit counts as exact, and how much larger than
 # the smallest residual the kept (largest) fit's may be.
@@ -500,6 +519,18 @@ def plan_auto(points: np.ndarray, tree: tuple, noise_threshold: float,
     return replace(plan, dense_share=float(share), dense=replace(dense, clean=False))
 
 
+def wide_fits(params: dict, plan: AutoPlan) -> bool:
+    """Whether the fits on a cloud of this (whole-cloud) plan may reach ``k`` beyond
+    :data:`QUIET_K`: a noisy plan, not dense, with relative noise above ``wide_noise``."""
+    return not plan.clean and plan.dense is None and plan.noise > params["wide_noise"]
+
+
+def largest_fit(params: dict, plan: AutoPlan) -> int:
+    """Neighbors of the widest fit a cloud of this plan may get, before the share limits of
+    :meth:`AutoRun.fit_k`: ``k``, at most :data:`QUIET_K` unless :func:`wide_fits`."""
+    return params["k"] if wide_fits(params, plan) else min(params["k"], QUIET_K)
+
+
 def thinned_points(points: np.ndarray, share: float) -> np.ndarray:
     """Indices (increasing, int64) of the points a dense cloud's fits see
     (:func:`~.sampling.thinned`)."""
@@ -649,6 +680,9 @@ class AutoRun:
         self.shifts = np.empty((0, 3))
         # RMS neighbor distance of each clean fit (its standard error's unit)
         self.clean_h = np.empty(points.shape[0]) if self.plan.clean else None
+        # Whether a noisy plan may fit beyond QUIET_K (fit_k); not on a dense cloud's thinned
+        # share
+        self.widen = True
 
     @property
     def tree(self) -> tuple:
@@ -722,12 +756,17 @@ class AutoRun:
         return max(SHARE_MIN_K, int(self.params["max_share"] * self.plan.points))
 
     def fit_k(self) -> int:
-        """Neighbors of the noisy branch's largest fits: ``k``, lowered on small clouds to
-        :data:`SHARE_TOPS` times :meth:`share_k`. Over a large share of a small cloud a fit
+        """Neighbors of the noisy branch's largest fits: ``k`` (at most :data:`QUIET_K` on
+        clouds quieter than ``wide_noise``, :func:`largest_fit`), lowered on small clouds to
+        :data:`SHARE_TOPS` times :meth:`share_k` (:data:`WIDE_SHARE_TOPS` times on noisier
+        clouds of :data:`WIDE_MIN_POINTS` and more). Over a large share of a small cloud a fit
         reaches around whole features (across a thin torus's tube; docs/accuracy.md section
         8), so a fit over :meth:`share_k` neighbors is always among the tops it falls back to
         (:func:`~curvature.fitting.scale_selection.pass_rungs`)."""
-        return min(self.params["k"], SHARE_TOPS * self.share_k())
+        wide = self.widen and wide_fits(self.params, self.plan)
+        tops = WIDE_SHARE_TOPS if wide and self.plan.points >= WIDE_MIN_POINTS else SHARE_TOPS
+        k = self.params["k"] if wide else min(self.params["k"], QUIET_K)
+        return min(k, tops * self.share_k())
 
     def _grow_total(self, count: int) -> None:
         """Count ``count`` more steps of work, found only as the run goes."""
@@ -1058,6 +1097,10 @@ class AutoRun:
                         track_reach=self.track_reach)
         inner._tick = self._tick  # its work counts towards this run's progress
         inner._grow_total = self._grow_total
+        # Its stage-1 normals already average normal_k / share points each, and a wide top
+        # at every thinned anchor of a 10M-point cloud would cost a 1536-neighbor query each:
+        # its fits stop at QUIET_K.
+        inner.widen = False
         reps, owner = grid_cells(sub, np.asarray(inner.plan.origin), inner.plan.cell)
         t0 = time.perf_counter()
         # Each row reads the anchor of its nearest thinned point; the second pass fits only
@@ -1381,4 +1424,5 @@ class _OutputView:
             self.res.mean_std[r] = ANCHORED_MEAN_SHARE * np.maximum(std1, std2)
 
 
-__all__ = ["AUTO_PARAMS", "AutoPlan", "AutoRun", "grid_cells", "plan_auto", "plan_sample"]
+__all__ = ["AUTO_PARAMS", "AutoPlan", "AutoRun", "grid_cells", "largest_fit", "plan_auto",
+           "plan_sample", "wide_fits"]

@@ -35,6 +35,7 @@ from numba import njit, prange
 from ..bounds import bounding_box, diagonal, inside_box
 from ..estimators.auto import (
     knn_csr,
+    largest_fit,
     neighbor_rows,
     plan_auto,
     plan_sample,
@@ -360,7 +361,8 @@ class TiledRun:
             self.mesh_graph = finder.graph(self.req.workers)
         radius = math.nan
         if self.req.method == "auto":
-            radius = (fit_radius(self.spts, tree, self.req.auto_params.get("k", 768), sample)
+            radius = (fit_radius(self.spts, tree, largest_fit(self.req.auto_params, self.plan),
+                                 sample)
                       / math.sqrt(self.plan.dense_share))
         self.graph = np.empty((n, ORIENT_K), np.int32) if self.req.mode == "auto" else None
         self.dense_stage1 = None

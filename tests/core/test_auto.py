@@ -62,8 +62,8 @@ def test_noisy_shapes_meet_half_of_apss(shape, kwargs, limit):
     e1, e2 = mean_errors(cloud, res)
     assert e1 <= limit[0] and e2 <= limit[1], (e1, e2)
     # each anchor keeps the least noisy fit that agrees with the noisier ones: on smooth
-    # shapes mostly the tops, over 384 and 768 neighbors
-    assert set(np.unique(res.neighbor_count)) <= {24, 48, 96, 192, 384, 768}
+    # shapes mostly the tops, over 384, 768 and (noise above wide_noise) 1536 neighbors
+    assert set(np.unique(res.neighbor_count)) <= {24, 48, 96, 192, 384, 768, 1536}
     assert np.mean(res.neighbor_count >= 384) > 0.5
 
 

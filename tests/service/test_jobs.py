@@ -41,7 +41,7 @@ def test_json_submission_is_accepted_with_location(client, sphere_points):
     assert job["input"] == {"kind": "arrays", "filename": None, "format": "json",
                             "bytes": len(response.request.content)}
     # core default: method auto with its own neighborhood sizes
-    assert job["params"]["method"] == "auto" and job["params"]["k"] == 768
+    assert job["params"]["method"] == "auto" and job["params"]["k"] == 1536
     assert job["n_points"] == len(sphere_points)
 
 

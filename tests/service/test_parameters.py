@@ -19,7 +19,7 @@ def test_params_without_a_method_are_the_default_methods(client, params):
     job = wait_for_job(client, response.json()["id"])
     assert job["status"] == "succeeded", job
     assert job["method"] == curvature.DEFAULT_METHOD == "auto"
-    assert job["params"]["k"] == params.get("k", 768)
+    assert job["params"]["k"] == params.get("k", 1536)
 
 
 def test_an_upload_without_a_method_is_the_default_method(client):
