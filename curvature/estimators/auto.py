@@ -85,7 +85,8 @@ from .sampling import cell_ijk, grid_keys, thinned
 PLAN_K = 24
 AUTO_PARAMS = (
     # k is the largest neighborhood; its floor is the smallest fit auto makes anyway (the
-    # clean-cloud fit and the first scale rung), so every k it accepts is honoured as given.
+    # clean-cloud fit and the first scale rung), so every k it accepts up to 768 is honoured
+    # as given (above 768 on clouds noisier than wide_noise).
     ParamSpec("k", int, 1536, PLAN_K, 4096,
               help="largest neighborhood of the curvature fits on noisy clouds, both passes: "
                    "the fits over 24, 48, 96, 192, 384 and 768 neighbors below k compete with "
