@@ -526,10 +526,11 @@ def wide_fits(params: dict, plan: AutoPlan) -> bool:
     return not plan.clean and plan.dense is None and plan.noise > params["wide_noise"]
 
 
-def largest_fit(params: dict, plan: AutoPlan) -> int:
+def largest_fit(params: dict, plan: AutoPlan, widen: bool = True) -> int:
     """Neighbors of the widest fit a cloud of this plan may get, before the share limits of
-    :meth:`AutoRun.fit_k`: ``k``, at most :data:`QUIET_K` unless :func:`wide_fits`."""
-    return params["k"] if wide_fits(params, plan) else min(params["k"], QUIET_K)
+    :meth:`AutoRun.fit_k`: ``k``, at most :data:`QUIET_K` unless ``widen`` and
+    :func:`wide_fits`."""
+    return params["k"] if widen and wide_fits(params, plan) else min(params["k"], QUIET_K)
 
 
 def thinned_points(points: np.ndarray, share: float) -> np.ndarray:
@@ -764,9 +765,9 @@ class AutoRun:
         reaches around whole features (across a thin torus's tube; docs/accuracy.md section
         8), so a fit over :meth:`share_k` neighbors is always among the tops it falls back to
         (:func:`~curvature.fitting.scale_selection.pass_rungs`)."""
-        wide = self.widen and wide_fits(self.params, self.plan)
+        k = largest_fit(self.params, self.plan, self.widen)
+        wide = k > QUIET_K
         tops = WIDE_SHARE_TOPS if wide and self.plan.points >= WIDE_MIN_POINTS else SHARE_TOPS
-        k = self.params["k"] if wide else min(self.params["k"], QUIET_K)
         return min(k, tops * self.share_k())
 
     def _grow_total(self, count: int) -> None:
