@@ -60,6 +60,7 @@ from ..fitting import scale_selection
 from ..fitting.border_shift import border_offsets, centroid_normals
 from ..fitting.kernels import FIT_IMPLICIT, FIT_MONGE, SOLVER_TAUBIN, fit_batch
 from ..fitting.normal_field import (
+    MODEL_QUADRIC,
     N_TERMS,
     nfr_from_anchors,
     pca_normals,
@@ -74,9 +75,10 @@ from ..params import ParamSpec
 from ..status import Status
 from ..uncertainty import (
     ANCHORED_MEAN_SHARE,
-    BIAS_CROSS,
     CLEAN_CALIBRATION,
+    NOISE_RESIDUAL_SHARE,
     REFINED_AGAIN_SIGMA,
+    anchored_std,
     with_floor,
 )
 from .sampling import cell_ijk, grid_keys, thinned
@@ -1354,10 +1356,12 @@ class AutoRun:
                 nbr = indices.reshape(-1, k)
                 reach[sl] = np.maximum((np.sqrt(d2) + w[nbr]).max(axis=1), w[anchors[sl]])
             self._tick(sl.stop - sl.start)
-        # each curvature's own bias, and a share of the other's (BIAS_CROSS)
         if sigma_share is not None:
             sigma = sigma * sigma_share
-        err = np.hypot(sigma[:, None], np.hypot(bias, BIAS_CROSS * bias[:, ::-1]))
+        # The kept fit's scale: the quadric's unit where it (or a rung) was kept.
+        h = np.where(model == MODEL_QUADRIC, quad_scale, scale)
+        err = anchored_std(sigma, bias, resid, h,
+                           self.plan.cubic_noise * self.plan.spacing / NOISE_RESIDUAL_SHARE)
         return (coef, scale, frame, quad, quad_scale, model, resid, status), reach, chosen, err
 
     def _refined_field(self, field, anchors, owner, fits, rows=None):
