@@ -88,19 +88,20 @@ PLAN_K = 24
 AUTO_PARAMS = (
     # k is the largest neighborhood; its floor is the smallest fit auto makes anyway (the
     # clean-cloud fit and the first scale rung), so every k it accepts up to 768 is honoured
-    # as given (above 768 on clouds noisier than wide_noise).
+    # as given (up to 1152 on quieter clouds, above on clouds noisier than wide_noise).
     ParamSpec("k", int, 1536, PLAN_K, 4096,
               help="largest neighborhood of the curvature fits on noisy clouds, both passes: "
                    "the fits over 24, 48, 96, 192, 384 and 768 neighbors below k compete with "
                    "the one over k (scale_gamma); fits above 384 use every (size // 384)-th "
-                   "neighbor; at least 24, the clean-cloud fit's size; at most 768 on clouds "
-                   "whose relative noise is below wide_noise; lowered on small clouds "
+                   "neighbor; at least 24, the clean-cloud fit's size; at most 1152 on clouds "
+                   "whose relative noise is below wide_noise, and above 768 there only where "
+                   "the fit's patch centres on its point; lowered on small clouds "
                    "(max_share)"),
     ParamSpec("normal_k", int, 48, 12, 256, help="neighbors of the stage-1 PCA normals"),
     ParamSpec("max_share", float, 0.04, 0.0, 1.0,
               help="share of the cloud's points that bounds the fits on small clouds: k is "
-                   "lowered to at most twice max(48, max_share * points) (four times on clouds "
-                   "of 9,600 points and more noisier than wide_noise), and a fit over "
+                   "lowered to at most twice max(48, max_share * points) (four times above 768 "
+                   "neighbors on clouds of 9,600 points and more), and a fit over "
                    "max(48, max_share * points) neighbors is among the candidates"),
     ParamSpec("nfr_ratio", float, 0.7, 0.0, 1e6,
               help="the cubic normal field replaces the normal-constrained quadric at an anchor "
@@ -115,10 +116,11 @@ AUTO_PARAMS = (
                    "cloud instead of its points, so a denser scan covers a larger patch with "
                    "the same neighbors (large: never)"),
     ParamSpec("wide_noise", float, 0.05, 0.0, 1e6,
-              help="relative noise below which the fits stop at 768 neighbors whatever k: "
-                   "above it k is honoured, up to 4 times max_share of clouds of 9,600 points "
-                   "and more (0: k everywhere; not on dense clouds, whose fits see a thinned "
-                   "share)"),
+              help="relative noise below which the fits stop at 1152 neighbors whatever k, "
+                   "and go beyond 768 only where the patch centres on its point: above it k "
+                   "is honoured, up to 4 times max_share of clouds of 9,600 points and more "
+                   "(0: k everywhere; dense clouds, whose fits see a thinned share, stop at "
+                   "768)"),
     ParamSpec("noise_threshold", float, 0.001, 0.0, 1.0,
               help="relative noise (RMS residual of cubic fits over 24 neighbors / spacing) "
                    "below which a cloud counts as clean and gets the implicit quadric over 24 "
@@ -171,7 +173,15 @@ SHARE_TOPS = 2
 # unchanged. At 0.1 % (relative noise 0.03-0.04; the part shapes at 0.05-0.1 % read
 # 0.008-0.039) the 1536 top's bias hides below its interval but not below its error: the
 # Bezier patch's band within 0.05-0.1 of its border (one-sided patches) 0.017 -> 0.024.
-QUIET_K = 768
+# Quieter clouds stop at QUIET_K, where a top wider than BASE_K is fitted only at anchors
+# its patch centres on (QUIET_SIDE, scale_selection._off_centre: the centroid of its points
+# within 0.09 of their RMS distance from the anchor): by a border, or where the surface bends
+# away within the patch, its bias is not turned down by Lepski's rule (stop 40: Bezier patch
+# at 0.1 %, seeds 1 to 3, 0.54 -> 0.50 per axis, 0.50 -> 0.47 with view noise; without the
+# limit 0.56 and 0.51). Dense clouds' thinned shares stop at BASE_K.
+BASE_K = 768
+QUIET_K = 1152
+QUIET_SIDE = 0.09
 WIDE_SHARE_TOPS = 4
 WIDE_MIN_POINTS = 9600
 # Clean clouds: smaller implicit fits tried where the 24-neighbor one is not exact, the
@@ -530,9 +540,21 @@ def wide_fits(params: dict, plan: AutoPlan) -> bool:
 
 def largest_fit(params: dict, plan: AutoPlan, widen: bool = True) -> int:
     """Neighbors of the widest fit a cloud of this plan may get, before the share limits of
-    :meth:`AutoRun.fit_k`: ``k``, at most :data:`QUIET_K` unless ``widen`` and
-    :func:`wide_fits`."""
-    return params["k"] if widen and wide_fits(params, plan) else min(params["k"], QUIET_K)
+    :meth:`AutoRun.fit_k`: ``k``, at most :data:`QUIET_K` unless :func:`wide_fits`, at
+    most :data:`BASE_K` unless ``widen``."""
+    if not widen:
+        return min(params["k"], BASE_K)
+    return params["k"] if wide_fits(params, plan) else min(params["k"], QUIET_K)
+
+
+def side_limit(params: dict, plan: AutoPlan, widen: bool = True) -> float:
+    """The ``side_limit`` of the fits beyond :data:`BASE_K` on a cloud of this plan
+    (:func:`~curvature.fitting.scale_selection.multiscale_anchor_fits`): :data:`QUIET_SIDE`
+    where they stop at :data:`QUIET_K`, none on noisier clouds (at 0.4-0.5 % noise the Bezier
+    patch's border gains more from the 1536 top's averaging than its bias costs: ratios to
+    the best CGAL jet of its 0.4-0.5 % cells 0.50-0.52 with a limit of 0.12, 0.49-0.50
+    without)."""
+    return np.inf if widen and wide_fits(params, plan) else QUIET_SIDE
 
 
 def thinned_points(points: np.ndarray, share: float) -> np.ndarray:
@@ -684,7 +706,7 @@ class AutoRun:
         self.shifts = np.empty((0, 3))
         # RMS neighbor distance of each clean fit (its standard error's unit)
         self.clean_h = np.empty(points.shape[0]) if self.plan.clean else None
-        # Whether a noisy plan may fit beyond QUIET_K (fit_k); not on a dense cloud's thinned
+        # Whether the fits may reach beyond BASE_K (fit_k); not on a dense cloud's thinned
         # share
         self.widen = True
 
@@ -762,13 +784,14 @@ class AutoRun:
     def fit_k(self) -> int:
         """Neighbors of the noisy branch's largest fits: ``k`` (at most :data:`QUIET_K` on
         clouds quieter than ``wide_noise``, :func:`largest_fit`), lowered on small clouds to
-        :data:`SHARE_TOPS` times :meth:`share_k` (:data:`WIDE_SHARE_TOPS` times on noisier
-        clouds of :data:`WIDE_MIN_POINTS` and more). Over a large share of a small cloud a fit
-        reaches around whole features (across a thin torus's tube; docs/accuracy.md section
-        8), so a fit over :meth:`share_k` neighbors is always among the tops it falls back to
-        (:func:`~curvature.fitting.scale_selection.pass_rungs`)."""
+        :data:`SHARE_TOPS` times :meth:`share_k` (:data:`WIDE_SHARE_TOPS` times, where ``k``
+        exceeds :data:`BASE_K`, on clouds of :data:`WIDE_MIN_POINTS` and more). Over a large
+        share of a small cloud a fit reaches around whole features (across a thin torus's
+        tube; docs/accuracy.md section 8), so a fit over :meth:`share_k` neighbors is always
+        among the tops it falls back to (:func:`~curvature.fitting.scale_selection.pass_rungs`).
+        """
         k = largest_fit(self.params, self.plan, self.widen)
-        wide = k > QUIET_K
+        wide = k > BASE_K
         tops = WIDE_SHARE_TOPS if wide and self.plan.points >= WIDE_MIN_POINTS else SHARE_TOPS
         return min(k, tops * self.share_k())
 
@@ -1103,7 +1126,7 @@ class AutoRun:
         inner._grow_total = self._grow_total
         # Its stage-1 normals already average normal_k / share points each, and a wide top
         # at every thinned anchor of a 10M-point cloud would cost a 1536-neighbor query each:
-        # its fits stop at QUIET_K.
+        # its fits stop at BASE_K.
         inner.widen = False
         reps, owner = grid_cells(sub, np.asarray(inner.plan.origin), inner.plan.cell)
         t0 = time.perf_counter()
@@ -1349,8 +1372,8 @@ class AutoRun:
             multiscale_anchor_fits(self.points if positions is None else positions, field,
                                    anchors[sl], indptr, indices,
                                    self.params["nfr_ratio"], ladder, kinds, tops, strides,
-                                   gamma,
-                                   scale_selection.SIGMA_GROWTH, calib,
+                                   gamma, scale_selection.SIGMA_GROWTH, calib,
+                                   side_limit(self.params, self.plan, self.widen),
                                    *arrays, chosen[sl], sigma[sl], bias[sl])
             if reach is not None:
                 nbr = indices.reshape(-1, k)

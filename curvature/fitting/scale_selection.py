@@ -123,8 +123,12 @@ RUNGS = {
 #: standard error: 0.73 with 4.4, about 1 with 3.3).
 TOPS = {"refine": ((384, 4.4), (768, 3.3)), "fit": ((384, 4.4), (768, 3.3))}
 TOP_POINTS = 384
-#: A default top is kept below ``k`` only when it is at most this fraction of ``k``.
-TOP_GAP = 1.0 / 1.5
+#: A default top is kept below ``k`` only when it is at most this fraction of ``k`` (2 / 3
+#: until stop 40; 0.75 keeps the 768 top below a 1152 one).
+TOP_GAP = 0.75
+#: Tops wider than this many neighbors are the ones the ``side_limit`` of
+#: :func:`multiscale_anchor_fits` may turn down.
+SIDE_FROM = 768
 #: Agreement tolerance in standard errors. 5 (before the circular rungs) let the wider
 #: normal fits' bias at corners and fillets pass (filleted box at 0.05 %: corners 1.02 with
 #: the circular rungs, 0.45 with 3.5, mean of the larger of the k1 and k2 errors); 3.5 costs
@@ -329,6 +333,25 @@ def _monge_rung(points, field, p, nbr, quad, circular, frame):
     quad[6], quad[7], quad[8] = b[0], b[1], b[2]
     quad[9] = c
     return OK, h, sampson_rms(a, b, c, xs) * h, c1 / h, c2 / h, design, side
+
+
+@njit(cache=True)
+def _off_centre(points, p, sub):
+    """Distance of the centroid of ``points[sub]`` from ``points[p]`` over their RMS distance
+    from it: 0 for a patch centred on its anchor, 0.6 for a half-disk around it."""
+    cx, cy, cz, sq = 0.0, 0.0, 0.0, 0.0
+    for i in sub:
+        dx = points[i, 0] - points[p, 0]
+        dy = points[i, 1] - points[p, 1]
+        dz = points[i, 2] - points[p, 2]
+        cx += dx
+        cy += dy
+        cz += dz
+        sq += dx * dx + dy * dy + dz * dz
+    m = sub.shape[0]
+    if sq <= 0.0:
+        return 0.0
+    return np.sqrt(cx * cx + cy * cy + cz * cz) / m / np.sqrt(sq / m)
 
 
 @njit(cache=True)
@@ -719,8 +742,8 @@ def _witnesses(est, kinds, t_status, t_model, levels):
 
 @njit(parallel=True, cache=True)
 def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, ladder, kinds,
-                           tops, strides, gamma, growth, calib, coef, scale, frame, quad,
-                           quad_scale, model, residual, status, chosen, sigma, bias):
+                           tops, strides, gamma, growth, calib, side_limit, coef, scale, frame,
+                           quad, quad_scale, model, residual, status, chosen, sigma, bias):
     """Fits at anchors with the neighborhood size chosen per anchor (module docstring).
 
     Parameters
@@ -742,6 +765,10 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
         Largest ratio of a kept fit's sigma to the smallest sigma of the fits below it.
     calib : ndarray, shape (l + t,)
         Standard-error calibration of every rung and of every top.
+    side_limit : float
+        A top wider than :data:`SIDE_FROM` is not fitted where the centroid of its points lies
+        farther than this share of their RMS distance from the anchor (:func:`_off_centre`;
+        inf: always fitted).
     coef, scale, frame, quad, quad_scale, model, residual, status
         Outputs as for ``nfr_anchor_fits``: the kept model.
     chosen : ndarray, shape (a,), int64
@@ -788,6 +815,11 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
                 t_status[t] = -1
                 continue
             sub = nbr[:size:strides[t]]
+            if size > SIDE_FROM and _off_centre(points, p, sub) > side_limit:
+                # A wide patch far off its anchor (by a cloud's border, or bent away from its
+                # tangent plane): its bias there hides within the smaller fits' noise.
+                t_status[t] = -1
+                continue
             fk1, fk2, fd, fh, fm, fs = nfr_anchor_fits_one(
                 points, field, p, sub, nfr_ratio, t_coef[t], t_quad[t], t_frame[t], t,
                 t_scale, t_qscale, t_model, t_resid, t_status)
