@@ -177,8 +177,9 @@ SHARE_TOPS = 2
 # its patch centres on (QUIET_SIDE, scale_selection._off_centre: the centroid of its points
 # within 0.09 of their RMS distance from the anchor): by a border, or where the surface bends
 # away within the patch, its bias is not turned down by Lepski's rule (stop 40: Bezier patch
-# at 0.1 %, seeds 1 to 3, 0.54 -> 0.50 per axis, 0.50 -> 0.47 with view noise; without the
-# limit 0.56 and 0.51). Dense clouds' thinned shares stop at BASE_K.
+# at 0.1 %, seeds 1 to 3, 0.54 -> 0.50 per axis, 0.50 -> 0.47 with view noise; a 1024 top
+# without the limit, seeds 1 and 2: 0.52 and 0.52). Dense clouds' thinned shares stop at
+# BASE_K.
 BASE_K = 768
 QUIET_K = 1152
 QUIET_SIDE = 0.09
