@@ -600,16 +600,12 @@ def _lepski(est, sg, grow, gamma, growth, first_top, witness, nested):
 
 
 @njit(cache=True)
-def _pair_bias(est, sg, best, r, z, col=0):
-    """Disagreement of fit ``best`` with fit ``r`` beyond ``z`` times their combined errors: of
-    the larger of k1's and k2's (``col`` 0), or of k1's (1) or k2's (2) alone."""
+def _pair_bias(est, sg, best, r, z):
+    """Disagreement of fit ``best`` with fit ``r`` beyond ``z`` times their combined errors:
+    of the larger of k1's and k2's."""
     slack = z * np.sqrt(sg[r] * sg[r] + sg[best] * sg[best])
     d1 = abs(est[best, 1] - est[r, 1]) - slack
     d2 = abs(est[best, 2] - est[r, 2]) - slack
-    if col == 1:
-        return max(0.0, d1)
-    if col == 2:
-        return max(0.0, d2)
     return max(0.0, d1, d2)
 
 
