@@ -126,6 +126,9 @@ def steps() -> Iterator[Step]:
     noisy = synthetic.torus(1500, noise=1.0, seed=2)
     # relative wide noise about 0.46: thinned to a fifth with dense_noise=0.25
     dense = synthetic.torus(4000, noise=2.0, seed=3)
+    # faces 3 spacings apart: stage 1 reads them over one side (estimators.wall_sides); fewer
+    # points read the other face as noise and take the dense branch
+    wall = synthetic.thin_plate(10000, noise=0.1, seed=1)
     for workers in (1, 2):
         def run(*args, _w=workers, **kw):
             return lambda: estimate(*args, workers=_w, **kw)
@@ -138,6 +141,7 @@ def steps() -> Iterator[Step]:
         yield f"auto noisy, {threads}", run(noisy.points)
         yield f"auto noisy at one scale, {threads}", run(noisy.points, scale_gamma=0.0)
         yield f"auto dense, {threads}", run(dense.points, dense_noise=0.25)
+        yield f"auto thin wall, {threads}", run(wall.points)
         for fit, extra in (("implicit", {}), ("implicit", {"solver": "algebraic"}),
                            ("monge", {}), ("adaptive", {}), ("nfr", {"k": 60})):
             yield (f"knn {fit} {extra or ''}, {threads}",

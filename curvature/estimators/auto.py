@@ -20,9 +20,10 @@ On noisy scans the neighborhood size decides the error far more than the fit mod
    of the first, refined once more away from features (:meth:`AutoRun._refine_again`).
    The first reads the normals at the cloud's border at their PCA
    neighborhoods' centroids, where such a normal belongs, as the normals of quadratic height
-   fits there (:mod:`curvature.fitting.border_shift`). Anchors cut the work of the large fits about
-   thirteenfold at no measured loss of accuracy; the second pass lowers the error further
-   (torus at 0.5 % noise: 0.035 -> 0.026).
+   fits there (:mod:`curvature.fitting.border_shift`); on a wall a few spacings thick the
+   stage-1 PCA is read over one side of it (:mod:`.wall_sides`). Anchors cut the work of the
+   large fits about thirteenfold at no measured loss of accuracy; the second pass lowers the
+   error further (torus at 0.5 % noise: 0.035 -> 0.026).
    On clouds of fewer than ``k / max_share`` points ``k`` is lowered (:meth:`AutoRun.fit_k`).
 4. **Scale per anchor** (:mod:`curvature.fitting.scale_selection`): beside the fit over ``k``
    neighbors, each anchor fits nested prefixes of its neighbor list (Monge quadrics over 24 and
@@ -63,6 +64,7 @@ from ..fitting.normal_field import (
     MODEL_QUADRIC,
     N_TERMS,
     nfr_from_anchors,
+    pca_flatness,
     pca_normals,
 )
 from ..fitting.normal_quadric import N_QUAD
@@ -82,6 +84,7 @@ from ..uncertainty import (
     with_floor,
 )
 from .sampling import cell_ijk, grid_keys, thinned
+from .wall_sides import one_side_normals
 
 # Neighbors of the spacing and noise measurements and of the clean-cloud fit.
 PLAN_K = 24
@@ -822,6 +825,7 @@ class AutoRun:
         r_normal = np.empty(n)
         r_fit = np.empty(n) if self.plan.clean else None
         r_isolation = np.empty(n)
+        flat = np.empty(n)
         rows, shifts = [np.empty(0, np.int64)], [np.empty((0, 3))]
         for sl in self._chunks(n):
             query = np.arange(sl.start, sl.stop, dtype=np.int64)
@@ -830,7 +834,7 @@ class AutoRun:
             r_normal[sl] = np.sqrt(d2[:, normal_k - 1])
             if graph is not None:
                 graph[sl] = nbr[:, :graph.shape[1]]
-            pca_normals(self.points, query, *_prefix_csr(nbr, normal_k), field[sl])
+            pca_flatness(self.points, query, *_prefix_csr(nbr, normal_k), field[sl], flat[sl])
             off_surface(self.points, query, np.ascontiguousarray(nbr[:, :normal_k]), field[sl],
                         self.plan.spacing, self.outliers[sl])
             if not self.plan.clean:
@@ -855,11 +859,28 @@ class AutoRun:
             self._tick(2 * (sl.stop - sl.start) if self.plan.clean else sl.stop - sl.start)
         isolated(self.points, self.tree, r_isolation, self.outliers)
         renormalled = self._normals_without_outliers(field, r_normal, normal_k)
-        # Offsets of normals refitted without outliers, or of outliers, would not match.
         rows, shifts = np.concatenate(rows), np.concatenate(shifts)
-        keep = ~self.outliers[rows] & ~np.isin(rows, renormalled)
+        sided = (np.empty(0, np.int64) if self.plan.clean
+                 else self._normals_of_one_side(field, flat, r_normal, normal_k))
+        del flat
+        # Offsets of normals refitted without outliers or over one side of a wall, or of
+        # outliers, would not match (a wall's two faces make its PCA neighborhoods look cut
+        # by a border: 8 to 11 % of the bench's plate and blade were moved).
+        keep = ~self.outliers[rows] & ~np.isin(rows, renormalled) & ~np.isin(rows, sided)
         self.shift_rows, self.shifts = rows[keep], shifts[keep]
         return field, (r_normal, r_fit)
+
+    def _normals_of_one_side(self, field, flat, r_normal, normal_k) -> np.ndarray:
+        """Stage-1 normals on thin walls over one side (:mod:`.wall_sides`), in ``field``;
+        returns the rows replaced."""
+        n = self.points.shape[0]
+
+        def nearest(rows, k):
+            return knn_csr(self.points, self.tree, rows, k)[1].reshape(-1, k)
+
+        noise = self.plan.cubic_noise * self.plan.spacing / NOISE_RESIDUAL_SHARE
+        return one_side_normals(self.points, field, flat, r_normal, noise, self.outliers,
+                                nearest, min(normal_k, n - 1), self.chunk_size)
 
     def _normals_without_outliers(self, field, r_normal, normal_k) -> np.ndarray:
         """Stage-1 normals again, without the outliers, where one was among the neighbors.

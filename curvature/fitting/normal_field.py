@@ -60,7 +60,58 @@ def supported(c1, c2, h):
     return max(abs(c1), abs(c2)) * h <= SUPPORT
 
 
-@njit(parallel=True, cache=True)
+@njit(cache=True, inline="always")
+def pca_normal_into(points, q, indices, lo, hi, cov, vec, out_row):
+    """PCA normal of point ``q`` over ``indices[lo:hi]`` and ``q`` itself into ``out_row``
+    (NaN where the points do not span a plane); returns the smallest eigenvalue of their
+    covariance over its trace (0 for a plane, 1/3 for an isotropic blob; NaN with the
+    normal). ``cov`` and ``vec`` (3, 3) are scratch."""
+    k = hi - lo
+    px, py, pz = points[q, 0], points[q, 1], points[q, 2]
+    ss = 0.0
+    for i in range(lo, hi):
+        r = indices[i]
+        x, y, z = points[r, 0] - px, points[r, 1] - py, points[r, 2] - pz
+        ss += x * x
+        ss += y * y
+        ss += z * z
+    scale = np.sqrt(ss / k) if k > 0 else 0.0
+    unit = scale if scale > 0.0 else 1.0
+    m = k + 1  # p itself, at the origin
+    cx = cy = cz = 0.0
+    for i in range(lo, hi):
+        r = indices[i]
+        cx += (points[r, 0] - px) / unit
+        cy += (points[r, 1] - py) / unit
+        cz += (points[r, 2] - pz) / unit
+    cx, cy, cz = cx / m, cy / m, cz / m
+    d0, d1, d2 = -cx, -cy, -cz
+    c00, c01, c02 = d0 * d0, d0 * d1, d0 * d2
+    c11, c12, c22 = d1 * d1, d1 * d2, d2 * d2
+    for i in range(lo, hi):
+        r = indices[i]
+        d0 = (points[r, 0] - px) / unit - cx
+        d1 = (points[r, 1] - py) / unit - cy
+        d2 = (points[r, 2] - pz) / unit - cz
+        c00 += d0 * d0
+        c01 += d0 * d1
+        c02 += d0 * d2
+        c11 += d1 * d1
+        c12 += d1 * d2
+        c22 += d2 * d2
+    cov[0, 0], cov[0, 1], cov[0, 2] = c00 / m, c01 / m, c02 / m
+    cov[1, 0], cov[1, 1], cov[1, 2] = cov[0, 1], c11 / m, c12 / m
+    cov[2, 0], cov[2, 1], cov[2, 2] = cov[0, 2], cov[1, 2], c22 / m
+    i0, i1, i2 = jacobi3(cov, vec)
+    if scale > 0.0 and cov[i1, i1] > 1e-10 * cov[i2, i2]:
+        for d in range(3):
+            out_row[d] = vec[d, i0]
+        return cov[i0, i0] / (cov[0, 0] + cov[1, 1] + cov[2, 2])
+    for d in range(3):
+        out_row[d] = np.nan
+    return np.nan
+
+
 def pca_normals(points, query, indptr, indices, out):
     """Unit PCA normals (arbitrary sign) of the query points over their neighborhoods.
 
@@ -77,57 +128,32 @@ def pca_normals(points, query, indptr, indices, out):
     out : ndarray, shape (m, 3)
         Output normals; NaN where the neighbors do not span a plane.
     """
+    pca_flatness(points, query, indptr, indices, out, np.empty(0))
+
+
+@njit(parallel=True, cache=True)
+def pca_flatness(points, query, indptr, indices, out, flat):
+    """:func:`pca_normals`, and how far each neighborhood is from a plane.
+
+    Parameters
+    ----------
+    points, query, indptr, indices, out
+        As for :func:`pca_normals`.
+    flat : ndarray, shape (m,) or (0,)
+        Output, unless empty: the smallest eigenvalue of each neighborhood's covariance over
+        its trace (0 on a plane; about 0.1 over the two faces of a wall a few neighborhood
+        radii thick); NaN where the normal is.
+    """
     m_all = query.shape[0]
     blocks = (m_all + PCA_BLOCK - 1) // PCA_BLOCK
     for b in prange(blocks):
         cov = np.empty((3, 3))
         vec = np.empty((3, 3))
         for j in range(b * PCA_BLOCK, min(m_all, (b + 1) * PCA_BLOCK)):
-            q = query[j]
-            lo, hi = indptr[j], indptr[j + 1]
-            k = hi - lo
-            px, py, pz = points[q, 0], points[q, 1], points[q, 2]
-            ss = 0.0
-            for i in range(lo, hi):
-                r = indices[i]
-                x, y, z = points[r, 0] - px, points[r, 1] - py, points[r, 2] - pz
-                ss += x * x
-                ss += y * y
-                ss += z * z
-            scale = np.sqrt(ss / k) if k > 0 else 0.0
-            unit = scale if scale > 0.0 else 1.0
-            m = k + 1  # p itself, at the origin
-            cx = cy = cz = 0.0
-            for i in range(lo, hi):
-                r = indices[i]
-                cx += (points[r, 0] - px) / unit
-                cy += (points[r, 1] - py) / unit
-                cz += (points[r, 2] - pz) / unit
-            cx, cy, cz = cx / m, cy / m, cz / m
-            d0, d1, d2 = -cx, -cy, -cz
-            c00, c01, c02 = d0 * d0, d0 * d1, d0 * d2
-            c11, c12, c22 = d1 * d1, d1 * d2, d2 * d2
-            for i in range(lo, hi):
-                r = indices[i]
-                d0 = (points[r, 0] - px) / unit - cx
-                d1 = (points[r, 1] - py) / unit - cy
-                d2 = (points[r, 2] - pz) / unit - cz
-                c00 += d0 * d0
-                c01 += d0 * d1
-                c02 += d0 * d2
-                c11 += d1 * d1
-                c12 += d1 * d2
-                c22 += d2 * d2
-            cov[0, 0], cov[0, 1], cov[0, 2] = c00 / m, c01 / m, c02 / m
-            cov[1, 0], cov[1, 1], cov[1, 2] = cov[0, 1], c11 / m, c12 / m
-            cov[2, 0], cov[2, 1], cov[2, 2] = cov[0, 2], cov[1, 2], c22 / m
-            i0, i1, i2 = jacobi3(cov, vec)
-            if scale > 0.0 and cov[i1, i1] > 1e-10 * cov[i2, i2]:
-                for d in range(3):
-                    out[j, d] = vec[d, i0]
-            else:
-                for d in range(3):
-                    out[j, d] = np.nan
+            f = pca_normal_into(points, query[j], indices, indptr[j], indptr[j + 1], cov, vec,
+                          out[j])
+            if flat.shape[0] > 0:
+                flat[j] = f
 
 
 @njit(cache=True)
