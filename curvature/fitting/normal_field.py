@@ -150,8 +150,8 @@ def pca_flatness(points, query, indptr, indices, out, flat):
         cov = np.empty((3, 3))
         vec = np.empty((3, 3))
         for j in range(b * PCA_BLOCK, min(m_all, (b + 1) * PCA_BLOCK)):
-            f = pca_normal_into(points, query[j], indices, indptr[j], indptr[j + 1], cov, vec,
-                          out[j])
+            f = pca_normal_into(points, query[j], indices, indptr[j], indptr[j + 1], cov,
+                                vec, out[j])
             if flat.shape[0] > 0:
                 flat[j] = f
 
