@@ -49,6 +49,13 @@ SHEET_NTH = 8
 SHEET_BLOCK = 64
 
 
+@njit(cache=True, inline="always")
+def _dist2(points, a, b):
+    """Squared distance between points ``a`` and ``b``."""
+    return ((points[a, 0] - points[b, 0]) ** 2 + (points[a, 1] - points[b, 1]) ** 2
+            + (points[a, 2] - points[b, 2]) ** 2)
+
+
 @njit(parallel=True, cache=True)
 def one_sheet_pca(points, query, nbr, excluded, out, flat):
     """PCA normals over the neighbors each query point reaches in short steps.
@@ -83,31 +90,18 @@ def one_sheet_pca(points, query, nbr, excluded, out, flat):
         vec = np.empty((3, 3))
         for j in range(b * SHEET_BLOCK, min(m, (b + 1) * SHEET_BLOCK)):
             p = query[j]
-            r = nbr[j, nth]
-            reach2 = SHEET_STEP * SHEET_STEP * ((points[r, 0] - points[p, 0]) ** 2
-                                                + (points[r, 1] - points[p, 1]) ** 2
-                                                + (points[r, 2] - points[p, 2]) ** 2)
-            tail = 0
+            reach2 = SHEET_STEP * SHEET_STEP * _dist2(points, p, nbr[j, nth])
             for a in range(k):
-                q = nbr[j, a]
                 reached[a] = False
-                if excluded[q]:
-                    continue
-                if ((points[q, 0] - points[p, 0]) ** 2 + (points[q, 1] - points[p, 1]) ** 2
-                        + (points[q, 2] - points[p, 2]) ** 2) <= reach2:
-                    reached[a] = True
-                    queue[tail] = a
-                    tail += 1
-            head = 0
+            # Breadth first from p itself (listed nowhere, so taken as the queue's source).
+            tail = 0
+            head = -1
             while head < tail:
-                qa = nbr[j, queue[head]]
+                src = p if head < 0 else nbr[j, queue[head]]
                 head += 1
                 for a in range(k):
                     q = nbr[j, a]
-                    if reached[a] or excluded[q]:
-                        continue
-                    if ((points[q, 0] - points[qa, 0]) ** 2 + (points[q, 1] - points[qa, 1]) ** 2
-                            + (points[q, 2] - points[qa, 2]) ** 2) <= reach2:
+                    if not reached[a] and not excluded[q] and _dist2(points, q, src) <= reach2:
                         reached[a] = True
                         queue[tail] = a
                         tail += 1
