@@ -42,7 +42,8 @@ SIDE_FLAT = 0.01
 #: thickness of 2.5 to 4. Step 1.0 / 1.2 / 1.5 (`curvature bench parts`' plate and blade,
 #: seeds 1 and 2): plate faces 0.191 / 0.229 / 0.338, rims 22.3 / 22.7 / 23.0, blade sides
 #: 0.214 / 0.210 / 0.214, leading edge 1.389 / 1.376 / 1.359 (1.09, 20.2, 0.231 and 1.355
-#: two-sided).
+#: two-sided). 1.0 reads the plate better but lies nearer the connection distance, which an
+#: unevenly sampled scan (stripes, density falling off with range) crosses more often.
 SHEET_STEP = 1.2
 SHEET_NTH = 8
 # Query points per parallel block of one_sheet_pca (its scratch arrays per block).
