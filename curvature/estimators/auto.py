@@ -878,9 +878,13 @@ class AutoRun:
         def nearest(rows, k):
             return knn_csr(self.points, self.tree, rows, k)[1].reshape(-1, k)
 
-        noise = self.plan.cubic_noise * self.plan.spacing / NOISE_RESIDUAL_SHARE
-        return one_side_normals(self.points, field, flat, r_normal, noise, self.outliers,
-                                nearest, min(normal_k, n - 1), self.chunk_size)
+        return one_side_normals(self.points, field, flat, r_normal, self._noise(),
+                                self.outliers, nearest, min(normal_k, n - 1), self.chunk_size)
+
+    def _noise(self) -> float:
+        """The cloud's noise in length units (standard deviation across the surface): the
+        plan's cubic-fit residual over :data:`NOISE_RESIDUAL_SHARE`."""
+        return self.plan.cubic_noise * self.plan.spacing / NOISE_RESIDUAL_SHARE
 
     def _normals_without_outliers(self, field, r_normal, normal_k) -> np.ndarray:
         """Stage-1 normals again, without the outliers, where one was among the neighbors.
@@ -1405,8 +1409,7 @@ class AutoRun:
             sigma = sigma * sigma_share
         # The kept fit's scale: the quadric's unit where it (or a rung) was kept.
         h = np.where(model == MODEL_QUADRIC, quad_scale, scale)
-        err = anchored_std(sigma, bias, resid, h,
-                           self.plan.cubic_noise * self.plan.spacing / NOISE_RESIDUAL_SHARE)
+        err = anchored_std(sigma, bias, resid, h, self._noise())
         return (coef, scale, frame, quad, quad_scale, model, resid, status), reach, chosen, err
 
     def _refined_field(self, field, anchors, owner, fits, rows=None):
