@@ -69,7 +69,7 @@ from ..fitting.normal_field import (
 )
 from ..fitting.normal_quadric import N_QUAD
 from ..fitting.outliers import ISOLATION_K, isolated, off_surface
-from ..fitting.scale_selection import DEFAULT_GAMMA, multiscale_anchor_fits
+from ..fitting.scale_selection import DEFAULT_GAMMA, RIDGE_POOL, multiscale_anchor_fits
 from ..fitting.shifted import adopt_neighbor_fits
 from ..memory import release_freed_memory
 from ..neighborhoods.kdtree import build_tree, knn_parallel
@@ -1388,11 +1388,17 @@ class AutoRun:
         if gamma == 0.0:  # no ladder: every anchor keeps its fit over k neighbors
             ladder, kinds, calib = ladder[:0], kinds[:0], calib[-1:]
             tops, strides = tops[-1:], strides[-1:]
-        # Neighbor lists are k long: chunk by neighbor entries, not anchors, so a chunk holds
-        # as many entries as a chunk of 24-neighbor queries would.
-        step = max(64, self.chunk_size * 24 // max(k, 24))
+        # A ridge rung picks its patch from RIDGE_POOL neighbors (a refit's k is 192): the
+        # lists are that long where the ladder has one; the other rungs and the tops use their
+        # first k.
+        listed = k
+        if (kinds == scale_selection.KIND_MONGE_RIDGE).any():
+            listed = min(max(k, RIDGE_POOL), self.points.shape[0] - 1)
+        # Chunk by neighbor entries, not anchors, so a chunk holds as many entries as a chunk
+        # of 24-neighbor queries would.
+        step = max(64, self.chunk_size * 24 // max(listed, 24))
         for sl in (slice(i, min(i + step, a)) for i in range(0, a, step)):
-            indptr, indices, d2 = knn_csr(self.points, self.tree, anchors[sl], k)
+            indptr, indices, d2 = knn_csr(self.points, self.tree, anchors[sl], listed)
             arrays = (coef[sl], scale[sl], frame[sl], quad[sl], quad_scale[sl], model[sl],
                       resid[sl], status[sl])
             multiscale_anchor_fits(self.points if positions is None else positions, field,
@@ -1402,7 +1408,7 @@ class AutoRun:
                                    side_limit(self.params, self.plan, self.widen),
                                    *arrays, chosen[sl], sigma[sl], bias[sl])
             if reach is not None:
-                nbr = indices.reshape(-1, k)
+                nbr = indices.reshape(-1, listed)
                 reach[sl] = np.maximum((np.sqrt(d2) + w[nbr]).max(axis=1), w[anchors[sl]])
             self._tick(sl.stop - sl.start)
         if sigma_share is not None:

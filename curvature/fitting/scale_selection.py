@@ -25,7 +25,12 @@ intersection of confidence intervals rule (Goldenshluger & Nemirovski, Math. Met
   :data:`TOPS`) makes sigma_s the measured error on noisy planes and spheres (docs/accuracy.md);
 * where the circular 48-point rung finds one principal curvature well below the other (a
   fillet, a leading edge), a ridge rung fits 96 points of a patch stretched along the smaller
-  curvature's direction: as narrow across the ridge as the 48-point rung, with twice its points;
+  curvature's direction: as narrow across the ridge as the 24-point rung, with four times its
+  points; a short ridge rung takes its 96 points from the 192 nearest only, so it is shorter
+  and wider. Their patches and the circular rungs' are not nested (a ridge rung is narrower
+  and longer than the 48-point rung), so each judges only what its patch cannot bias more
+  than the other's (:func:`_witnesses`): a wider circular rung the ridge rung's curvature
+  along the ridge, the ridge rung the short one's across it;
 * the largest fit is kept whose k1 and k2 agree with those of every smaller fit within ``gamma
   (sigma_s + sigma_r)`` (Lepski's rule: its bias is not visible above the noise of any smaller fit;
   the 24-point fit only checks the 48-point one, and a normal quadric that misfits its
@@ -87,6 +92,36 @@ RIDGE_ASPECT = 4.0
 #: patch reaches into the fillets (a filleted box's corners: 0.45 -> 0.89 without the test).
 RIDGE_RATIO = 0.5
 RIDGE_POOL = 384
+#: The short ridge rung: the ridge rung's 96 points from the nearest RIDGE_SHORT_POOL only,
+#: the ridge rung of the refits (``AutoRun._refit``, 192 neighbors) until stop 42. The ball
+#: of 192 cuts its ellipse along the ridge: about 0.8 times as wide across as the 48-point
+#: rung and as long as that ball. Beside a leading edge of 2.6 spacings' radius (the bench's
+#: 10,000-point blade, 0.1 % noise) it reads the edge low like the 48-point rung (mean of
+#: the larger of the k1 and k2 errors at the refitted points 1.2, the ridge rung 0.6); on a
+#: fillet of 6 spacings (the filleted box at 0.05 %) its standard error is half the ridge
+#: rung's, and it turns down the normal-quadric rungs that read the fillet 8 % low, which
+#: the ridge rung's wider interval lets pass (the box's fillets +18 % without it).
+KIND_MONGE_RIDGE_SHORT = 4
+RIDGE_SHORT_POOL = 192
+#: How a smaller fit judges a larger one in Lepski's rule (``witness`` of :func:`_witnesses`):
+#: not at all (0), by k1 and k2 (1), by the curvature smaller in magnitude only (ALONG: a
+#: circular rung wider across a ridge than the ridge rung, whose curvature across it the
+#: wider patch reads low), or by the larger only, within NESTED_AGREEMENT combined standard
+#: errors (ACROSS: the ridge rung judging the short one, which shares most of its points and
+#: is shorter along the ridge, where the longer patch is the one that may reach a corner).
+ALONG = 2
+ACROSS = 3
+#: A ridge rung's sigma may exceed that of a wider circular rung below it by this factor in
+#: the growth test (it fits a narrower patch: beside the bench blade's leading edge its
+#: sigma is 0.7 to 1.15 times the 48-point rung's; on the filleted box's fillets, where its
+#: patch reaches a corner along the fillet, 1.7 to 3.5 times).
+RIDGE_GROWTH = 1.3
+#: ... where the ridge is real: the widest circular rung below the ridge rung reads its larger
+#: curvature above this many of its standard errors (the bench blade's leading edge 15 to 20,
+#: the filleted box's fillets about 40). On a noisy plane a 48-point rung frames a ridge by
+#: chance: there the usual rules hold, or the ridge rung's chance readings are kept (a
+#: 10,000-point plane at 0.1 % noise: p99.9 of |k| 0.08-0.15 -> 1.4-1.5 on two seeds of 4).
+RIDGE_SIGNIFICANCE = 4.0
 #: A Monge rung whose residual exceeds this share of its patch's RMS radius (across the ridge
 #: for a ridge rung) is not used. Noise that large against the patch biases a height fit
 #: instead of only scattering it: on a 1M-point torus at 0.1 % noise (residual 0.26 of the
@@ -109,7 +144,8 @@ MONGE_NOISE_LIMIT = 0.12
 RUNGS = {
     "refine": ((96, KIND_NORMAL_QUADRIC, 1.9), (192, KIND_NORMAL_QUADRIC, 2.6)),
     "fit": ((24, KIND_MONGE_CIRCULAR, 6.7), (48, KIND_MONGE_CIRCULAR, 5.5),
-            (96, KIND_MONGE_RIDGE, 4.1), (96, KIND_MONGE_CIRCULAR, 5.0),
+            (96, KIND_MONGE_RIDGE, 4.1), (96, KIND_MONGE_RIDGE_SHORT, 4.1),
+            (96, KIND_MONGE_CIRCULAR, 5.0),
             (96, KIND_NORMAL_QUADRIC, 1.9), (192, KIND_NORMAL_QUADRIC, 2.6)),
 }
 #: The default tops of each pass, ``(neighbors, calibration)``: full fits (both models)
@@ -492,11 +528,12 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out):
         spread = 0.0
         inflate = 1.0
         misfit = 0.0
-        if kinds[li] == KIND_MONGE_RIDGE:
+        if kinds[li] == KIND_MONGE_RIDGE or kinds[li] == KIND_MONGE_RIDGE_SHORT:
             # A ridge rung needs the directions of a smaller fit and a list twice its size.
             if not framed or 2 * s > nbr.shape[0]:
                 continue
-            pool = nbr[:min(nbr.shape[0], RIDGE_POOL)]
+            pool = nbr[:min(nbr.shape[0], RIDGE_SHORT_POOL if kinds[li] == KIND_MONGE_RIDGE_SHORT
+                            else RIDGE_POOL)]
             patch, spread = _ridge_patch(points, p, pool, s, frame)
             st, h, d, c1, c2, design, side = _monge_rung(points, field, p, patch, quads[li],
                                                          CIRCULAR_ROUNDS, scratch)
@@ -543,14 +580,23 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out):
 
 
 @njit(cache=True)
-def _agree(est, sg, a, b, gamma):
-    """Whether fits ``a`` and ``b`` agree within ``gamma`` times the sum of their sigmas."""
+def _agree(est, sg, a, b, gamma, part=1):
+    """Whether fits ``a`` and ``b`` agree within ``gamma`` times the sum of their sigmas, in k1
+    and k2 (``part`` 1) or in the curvature smaller in magnitude (:data:`ALONG`); in the
+    larger within :data:`NESTED_AGREEMENT` times their combined sigma (:data:`ACROSS`)."""
     tol = gamma * (sg[a] + sg[b])
-    return abs(est[a, 1] - est[b, 1]) <= tol and abs(est[a, 2] - est[b, 2]) <= tol
+    if part == 1:
+        return abs(est[a, 1] - est[b, 1]) <= tol and abs(est[a, 2] - est[b, 2]) <= tol
+    small_a = abs(est[a, 1]) < abs(est[a, 2])
+    small_b = abs(est[b, 1]) < abs(est[b, 2])
+    if part == ACROSS:
+        small_a, small_b = not small_a, not small_b
+        tol = NESTED_AGREEMENT * np.sqrt(sg[a] * sg[a] + sg[b] * sg[b])
+    return abs(est[a, 1 if small_a else 2] - est[b, 1 if small_b else 2]) <= tol
 
 
 @njit(cache=True)
-def _lepski(est, sg, grow, gamma, growth, first_top, witness, nested):
+def _lepski(est, sg, grow, gamma, growth, first_top, witness, nested, peer):
     """Index of the fit to keep: the largest whose k1 and k2 agree with those of every smaller
     fit within ``gamma`` times the sum of both sigmas, and whose sigma is at most ``growth``
     times the smallest sigma below it (a ladder rung: :data:`RUNG_GROWTH` times; -1 when none
@@ -561,12 +607,14 @@ def _lepski(est, sg, grow, gamma, growth, first_top, witness, nested):
     :data:`TOP_AGREEMENT` times their combined sigma: the two fit the same model to nested
     patches, so their noise is shared and a small difference already shows a bias; so must a
     circular Monge rung with the one below it (``nested``, :func:`nested_rungs`, within
-    :data:`NESTED_AGREEMENT`). A fit r judges a larger fit c only where ``witness[c, r]``
-    (:func:`_witnesses`).
+    :data:`NESTED_AGREEMENT`). A fit r judges a larger fit c only where ``witness[c, r]``,
+    and only in the curvatures it names; a sigma r not ``peer[c, r]`` counts
+    :data:`RIDGE_GROWTH` times in c's growth test (:func:`_witnesses`).
 
     Each candidate is compared with every smaller rung directly, not with a running intersection, so
     one chance disagreement between two noisy small fits does not stop the selection at the smallest
-    of them; and the smallest rung (24 points, the noisiest) can only turn down the next: alone it
+    of them; and the smallest rung (24 points, the noisiest) can only turn down the next (and the
+    ridge rung, as narrow as itself across the ridge): alone it
     stopped every wider fit where it was off by chance (a 10,000-point plane at 0.1 % noise, p99.9
     of |k| 1.9 with it, 1.3 without, max 9.6 and 2.8), while at fillets and corners the 48-point
     rung sees the same biases. The growth test turns down a large fit whose residual jumped (it
@@ -582,10 +630,10 @@ def _lepski(est, sg, grow, gamma, growth, first_top, witness, nested):
         for r in range(c):
             if not np.isfinite(sg[r]):
                 continue
-            smallest = min(smallest, grow[r])
-            if (r == 0 and c > 1) or not witness[c, r]:
+            smallest = min(smallest, grow[r] * (1.0 if peer[c, r] else RIDGE_GROWTH))
+            if witness[c, r] == 0:
                 continue
-            if not _agree(est, sg, c, r, gamma):
+            if not _agree(est, sg, c, r, gamma, witness[c, r]):
                 agrees = False
                 break
         if agrees and c > first_top and np.isfinite(sg[c - 1]):
@@ -610,12 +658,13 @@ def _pair_bias(est, sg, best, r, z):
 
 
 @njit(cache=True)
-def _bias(est, sg, best):
+def _bias(est, sg, best, peer):
     """Bias of fit ``best`` as :func:`_least_error` weighs it: the largest disagreement of
-    its k1 or k2 with a smaller usable fit beyond :data:`BIAS_SLACK` times their errors."""
+    its k1 or k2 with a smaller usable fit (``peer[best]``, :func:`_witnesses`) beyond
+    :data:`BIAS_SLACK` times their errors."""
     out = 0.0
     for r in range(best):
-        if np.isfinite(sg[r]):
+        if np.isfinite(sg[r]) and peer[best, r]:
             out = max(out, _pair_bias(est, sg, best, r, BIAS_SLACK))
     return out
 
@@ -657,7 +706,7 @@ def _reported_bias(est, sg, best, col):
 
 
 @njit(cache=True)
-def _least_error(est, sg, best, kinds, gamma):
+def _least_error(est, sg, best, kinds, gamma, peer):
     """Fit ``best`` (Lepski's choice) or a smaller positional rung that shows best biased.
 
     Lepski's rule passes a wide fit whose bias hides within the noise of the smaller fits
@@ -670,24 +719,25 @@ def _least_error(est, sg, best, kinds, gamma):
     below best within ``gamma`` (a chance outlier among them shows nothing); of several such
     the least. Without a disagreement nothing switches: a smaller sigma alone does not make a
     smaller fit better (the normal fits' sigmas are below the tops' on a torus, their errors
-    above).
+    above). Only ``peer`` pairs count (:func:`_witnesses`): a circular rung wider across a
+    ridge than the ridge rung neither replaces it nor shows it biased.
     """
     keep = best
     least = np.inf
     top = min(best, kinds.shape[0])
     for r in range(1, top):
-        if not np.isfinite(sg[r]) or kinds[r] == KIND_NORMAL_QUADRIC:
+        if not np.isfinite(sg[r]) or kinds[r] == KIND_NORMAL_QUADRIC or not peer[best, r]:
             continue
         shown = _pair_bias(est, sg, best, r, gamma * SWITCH_SLACK)
         if shown == 0.0:
             continue
-        e = sg[r] * sg[r] + _bias(est, sg, r) ** 2
+        e = sg[r] * sg[r] + _bias(est, sg, r, peer) ** 2
         if not (e < least and e < sg[best] * sg[best] + shown * shown):
             continue
         consistent = True
         for m in range(top):
             if m != r and np.isfinite(sg[m]) and kinds[m] != KIND_NORMAL_QUADRIC and \
-                    not _agree(est, sg, r, m, gamma):
+                    peer[max(m, r), min(m, r)] and not _agree(est, sg, r, m, gamma):
                 consistent = False
                 break
         if consistent:
@@ -714,26 +764,68 @@ def nested_rungs(kinds, ntop):
 
 
 @njit(cache=True)
-def _witnesses(est, kinds, t_status, t_model, levels):
-    """Which smaller fit judges which by agreement in Lepski's rule: ``witness[c, r]``, shape
-    (l + t, l + t), bool.
+def _significant_ridge(est, sg, kinds, c):
+    """Whether the widest usable circular rung below ridge rung ``c`` reads its larger
+    curvature above :data:`RIDGE_SIGNIFICANCE` times its sigma."""
+    for r in range(c - 1, -1, -1):
+        if kinds[r] == KIND_MONGE_CIRCULAR and np.isfinite(sg[r]) and est[r, 0] == 1.0:
+            return max(abs(est[r, 1]), abs(est[r, 2])) > RIDGE_SIGNIFICANCE * sg[r]
+    return False
 
-    Every smaller fit judges a larger one, except a normal-quadric rung whose normals misfit
-    the quadric more than a top's polynomial normal field misfits them
-    (:data:`WITNESS_MISFIT`): that top kept the field because the quadric misfits its patch,
-    and where the quadric misfits the rung's smaller patch too, the rung's curvature carries
-    that misfit, not the top's bias. The growth test still counts the rung's sigma.
+
+@njit(cache=True)
+def _witnesses(est, sg, kinds, t_status, t_model, levels):
+    """Which smaller fit judges which in Lepski's rule, and whose sigma and bias count.
+
+    Every smaller fit judges a larger one in k1 and k2, except:
+
+    - the 24-point rung (the noisiest), which judges only the next rung and the ridge rung,
+      whose patch is as narrow across the ridge as its own;
+    - the wider circular rungs judge the ridge rung only in the curvature along the ridge
+      (:data:`ALONG`): across it their patches reach farther round a leading edge and read
+      it lower than the ridge rung does (the bench blade's 48-point rung 13 to 18 for 20).
+      They are not its ``peer``: the growth test allows the ridge rung
+      :data:`RIDGE_GROWTH` times their sigma, :func:`_least_error` neither lets them replace
+      it nor weighs their disagreement as its bias;
+    - the ridge rung judges the short ridge rung in the curvature across the ridge only
+      (:data:`ACROSS`);
+    - a normal-quadric rung whose normals misfit the quadric more than a top's polynomial
+      normal field misfits them (:data:`WITNESS_MISFIT`) does not judge that top: the top
+      kept the field because the quadric misfits its patch, and where the quadric misfits the
+      rung's smaller patch too, the rung's curvature carries that misfit, not the top's bias.
+      The growth test still counts the rung's sigma.
+
+    Returns
+    -------
+    witness : ndarray, shape (l + t, l + t), int8
+        ``witness[c, r]``: 0 (r does not judge c), 1 (k1 and k2), :data:`ALONG` or
+        :data:`ACROSS` (:func:`_agree`).
+    peer : ndarray, shape (l + t, l + t), bool
+        Whether r's sigma counts fully in c's growth test and r may show c biased.
     """
     count = levels + t_status.shape[0]
-    witness = np.ones((count, count), np.bool_)
+    witness = np.ones((count, count), np.int8)
+    witness[2:, 0] = 0  # the 24-point rung judges only the next (_lepski)
+    peer = np.ones((count, count), np.bool_)
+    for c in range(levels):
+        if kinds[c] != KIND_MONGE_RIDGE or not _significant_ridge(est, sg, kinds, c):
+            continue
+        witness[c, 0] = 1  # as narrow across the ridge as the ridge rung
+        for r in range(1, c):
+            if kinds[r] == KIND_MONGE_CIRCULAR:  # wider across it
+                witness[c, r] = ALONG
+                peer[c, r] = False
+        for r in range(c + 1, levels):
+            if kinds[r] == KIND_MONGE_RIDGE_SHORT:  # shorter along it, wider across
+                witness[r, c] = ACROSS
     for t in range(t_status.shape[0]):
         if t_status[t] != OK or t_model[t] != MODEL_FIELD:
             continue
         for li in range(levels):
             if kinds[li] == KIND_NORMAL_QUADRIC and \
                     est[li, 7] > WITNESS_MISFIT * est[levels + t, 7]:
-                witness[levels + t, li] = False
-    return witness
+                witness[levels + t, li] = 0
+    return witness, peer
 
 
 @njit(parallel=True, cache=True)
@@ -837,17 +929,25 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
                 grow[li] = sg[li]
                 if li >= levels:
                     grow[li] = scale_sigma(shape_d[li - levels], est[li, 5], s, calib[li])
-        witness = _witnesses(est, kinds, t_status, t_model, levels)
-        best = _lepski(est, sg, grow, gamma, growth, levels, witness, nested)
+        # Beside no real ridge (RIDGE_SIGNIFICANCE) one ridge rung, from the list a top of
+        # k reads: the short one of a refit's 192 neighbors, else the narrow one.
+        short_only = tops[ntop - 1] < RIDGE_POOL
+        for li in range(levels):
+            if (kinds[li] == KIND_MONGE_RIDGE or kinds[li] == KIND_MONGE_RIDGE_SHORT) and \
+                    (kinds[li] == KIND_MONGE_RIDGE) == short_only and \
+                    not _significant_ridge(est, sg, kinds, li):
+                sg[li] = grow[li] = np.inf
+        witness, peer = _witnesses(est, sg, kinds, t_status, t_model, levels)
+        best = _lepski(est, sg, grow, gamma, growth, levels, witness, nested, peer)
         if best < 0:  # nothing else usable: the noise-limited Monge rungs (ladder_estimates)
             for li in range(levels):
                 if est[li, 0] == 2.0:
                     sg[li] = (scale_sigma(est[li, 3], est[li, 5], sizes[li], calib[li])
                               * est[li, 6])
                     grow[li] = sg[li]
-            best = _lepski(est, sg, grow, gamma, growth, levels, witness, nested)
+            best = _lepski(est, sg, grow, gamma, growth, levels, witness, nested, peer)
         if best > 0:
-            best = _least_error(est, sg, best, kinds, gamma)
+            best = _least_error(est, sg, best, kinds, gamma, peer)
         # The top to report when nothing is usable: the largest that fitted, else the first
         # (its status stands; a wider top is only tried where the one below it was usable).
         keep = ntop - 1
