@@ -30,7 +30,9 @@ intersection of confidence intervals rule (Goldenshluger & Nemirovski, Math. Met
   and wider. Their patches and the circular rungs' are not nested (a ridge rung is narrower
   and longer than the 48-point rung), so each judges only what its patch cannot bias more
   than the other's (:func:`_witnesses`): a wider circular rung the ridge rung's curvature
-  along the ridge, the ridge rung the short one's across it;
+  along the ridge, the ridge rung the short one's across it; beside a tight, nearly
+  cylindrical ridge the normal fits, whose stage-1 normals are smoothed there, are not used
+  (:data:`RIDGE_TURN`);
 * the largest fit is kept whose k1 and k2 agree with those of every smaller fit within ``gamma
   (sigma_s + sigma_r)`` (Lepski's rule: its bias is not visible above the noise of any smaller fit;
   the 24-point fit only checks the 48-point one, and a normal quadric that misfits its
@@ -122,6 +124,19 @@ RIDGE_GROWTH = 1.3
 #: chance: there the usual rules hold, or the ridge rung's chance readings are kept (a
 #: 10,000-point plane at 0.1 % noise: p99.9 of |k| 0.08-0.15 -> 1.4-1.5 on two seeds of 4).
 RIDGE_SIGNIFICANCE = 4.0
+#: Beside a significant ridge that is nearly a cylinder (the ridge rung's smaller curvature
+#: below RIDGE_CYLINDRICAL times its larger) and tight (the circular rung that framed it turns
+#: its normal by more than RIDGE_TURN radians over its patch's RMS radius, ``|k| h``), the
+#: normal fits (the normal-quadric rungs and the tops) are not used: their normals come from
+#: PCA over 48 neighbors, smoothed where the ridge meets its flanks, and they read such a ridge
+#: low with small standard errors (the filleted box's fillets, ``|k| h`` 0.40 to 0.53: the
+#: 96-point normal quadric 8 % low with a sigma of 0.03; the blade's leading edge, 0.94 to
+#: 1.17). Smooth shapes stay below (issue 23's 10,000-point clouds, p99: torus 0.30, cylinder
+#: 0.17, sphere 0.12, Bezier patch 0.07), but an ellipsoid's ends reach 0.64 (p95 0.43) with a
+#: smaller curvature 0.12 to 0.30 times the larger: without the cylinder test its mean error at
+#: 0.1 % rose 20 %, at RIDGE_TURN 0.2 the torus's 110 to 180 %.
+RIDGE_CYLINDRICAL = 0.1
+RIDGE_TURN = 0.4
 #: A Monge rung whose residual exceeds this share of its patch's RMS radius (across the ridge
 #: for a ridge rung) is not used. Noise that large against the patch biases a height fit
 #: instead of only scattering it: on a 1M-point torus at 0.1 % noise (residual 0.26 of the
@@ -774,6 +789,21 @@ def _significant_ridge(est, sg, kinds, c):
 
 
 @njit(cache=True)
+def _tight_ridge(est, sg, kinds, c):
+    """Whether usable ridge rung ``c`` reads a significant, tight, nearly cylindrical ridge
+    (:data:`RIDGE_CYLINDRICAL`, :data:`RIDGE_TURN`)."""
+    if not np.isfinite(sg[c]) or not _significant_ridge(est, sg, kinds, c):
+        return False
+    big = max(abs(est[c, 1]), abs(est[c, 2]))
+    if not min(abs(est[c, 1]), abs(est[c, 2])) < RIDGE_CYLINDRICAL * big:
+        return False
+    for r in range(c - 1, -1, -1):  # the circular rung that framed it
+        if kinds[r] == KIND_MONGE_CIRCULAR and np.isfinite(sg[r]) and est[r, 0] == 1.0:
+            return max(abs(est[r, 1]), abs(est[r, 2])) * est[r, 5] > RIDGE_TURN
+    return False
+
+
+@njit(cache=True)
 def _witnesses(est, sg, kinds, t_status, t_model, levels):
     """Which smaller fit judges which in Lepski's rule, and whose sigma and bias count.
 
@@ -937,6 +967,11 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
                     (kinds[li] == KIND_MONGE_RIDGE) == short_only and \
                     not _significant_ridge(est, sg, kinds, li):
                 sg[li] = grow[li] = np.inf
+        for li in range(levels):
+            if kinds[li] == KIND_MONGE_RIDGE and _tight_ridge(est, sg, kinds, li):
+                for r in range(levels + ntop):  # no normal fit (RIDGE_TURN)
+                    if r >= levels or kinds[r] == KIND_NORMAL_QUADRIC:
+                        sg[r] = grow[r] = np.inf
         witness, peer = _witnesses(est, sg, kinds, t_status, t_model, levels)
         best = _lepski(est, sg, grow, gamma, growth, levels, witness, nested, peer)
         if best < 0:  # nothing else usable: the noise-limited Monge rungs (ladder_estimates)
