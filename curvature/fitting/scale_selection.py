@@ -779,13 +779,21 @@ def nested_rungs(kinds, ntop):
 
 
 @njit(cache=True)
-def _significant_ridge(est, sg, kinds, c):
-    """Whether the widest usable circular rung below ridge rung ``c`` reads its larger
-    curvature above :data:`RIDGE_SIGNIFICANCE` times its sigma."""
+def _framing_rung(est, sg, kinds, c):
+    """The widest usable circular rung below ridge rung ``c`` (the one whose directions framed
+    it; -1: none)."""
     for r in range(c - 1, -1, -1):
         if kinds[r] == KIND_MONGE_CIRCULAR and np.isfinite(sg[r]) and est[r, 0] == 1.0:
-            return max(abs(est[r, 1]), abs(est[r, 2])) > RIDGE_SIGNIFICANCE * sg[r]
-    return False
+            return r
+    return -1
+
+
+@njit(cache=True)
+def _significant_ridge(est, sg, kinds, c):
+    """Whether the rung that framed ridge rung ``c`` reads its larger curvature above
+    :data:`RIDGE_SIGNIFICANCE` times its sigma."""
+    r = _framing_rung(est, sg, kinds, c)
+    return r >= 0 and max(abs(est[r, 1]), abs(est[r, 2])) > RIDGE_SIGNIFICANCE * sg[r]
 
 
 @njit(cache=True)
@@ -797,10 +805,8 @@ def _tight_ridge(est, sg, kinds, c):
     big = max(abs(est[c, 1]), abs(est[c, 2]))
     if not min(abs(est[c, 1]), abs(est[c, 2])) < RIDGE_CYLINDRICAL * big:
         return False
-    for r in range(c - 1, -1, -1):  # the circular rung that framed it
-        if kinds[r] == KIND_MONGE_CIRCULAR and np.isfinite(sg[r]) and est[r, 0] == 1.0:
-            return max(abs(est[r, 1]), abs(est[r, 2])) * est[r, 5] > RIDGE_TURN
-    return False
+    r = _framing_rung(est, sg, kinds, c)
+    return max(abs(est[r, 1]), abs(est[r, 2])) * est[r, 5] > RIDGE_TURN
 
 
 @njit(cache=True)
@@ -809,8 +815,12 @@ def _witnesses(est, sg, kinds, t_status, t_model, levels):
 
     Every smaller fit judges a larger one in k1 and k2, except:
 
-    - the 24-point rung (the noisiest), which judges only the next rung and the ridge rung,
-      whose patch is as narrow across the ridge as its own;
+    - the 24-point rung (the noisiest), which judges only the next rung;
+
+    beside a significant ridge (:func:`_significant_ridge`; elsewhere chance readings):
+
+    - the 24-point rung judges the ridge rung too, whose patch is as narrow across the ridge
+      as its own;
     - the wider circular rungs judge the ridge rung only in the curvature along the ridge
       (:data:`ALONG`): across it their patches reach farther round a leading edge and read
       it lower than the ridge rung does (the bench blade's 48-point rung 13 to 18 for 20).
@@ -819,6 +829,9 @@ def _witnesses(est, sg, kinds, t_status, t_model, levels):
       it nor weighs their disagreement as its bias;
     - the ridge rung judges the short ridge rung in the curvature across the ridge only
       (:data:`ACROSS`);
+
+    and at the tops:
+
     - a normal-quadric rung whose normals misfit the quadric more than a top's polynomial
       normal field misfits them (:data:`WITNESS_MISFIT`) does not judge that top: the top
       kept the field because the quadric misfits its patch, and where the quadric misfits the
