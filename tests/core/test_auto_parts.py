@@ -36,7 +36,9 @@ def test_noisy_box_keeps_fillets_corners_and_flat_faces(noisy_box):
     # issue 15's targets: fillets 10 % of 1/R, corners 12 %, faces 3 % (measured 2.9 %,
     # 2.8 % (k1) and 6.3 % (k2), 1.4 % (k1) and 0.9 % (k2); at stop 29 6.3 %, 3.8 % and 8.3 %,
     # 1.6 % and 0.6 %; before the circular rungs and the refits 8.4 %, 8.6 % and 23 %, 2.1 %)
-    assert region_mean(cloud, res, "fillet") <= 0.06 / R  # tighter than the issue: kept gains
+    # tighter than the issue: kept gains (0.165 = 3.3 % until the normal fits sat out beside
+    # tight ridges, stop 42)
+    assert region_mean(cloud, res, "fillet") <= 0.032 / R
     assert region_mean(cloud, res, "corner") <= 0.12 / R
     assert region_mean(cloud, res, "corner", "k2") <= 0.08 / R
     assert region_mean(cloud, res, "face") <= 0.03 / R
