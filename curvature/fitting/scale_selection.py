@@ -27,12 +27,13 @@ intersection of confidence intervals rule (Goldenshluger & Nemirovski, Math. Met
   fillet, a leading edge), a ridge rung fits 96 points of a patch stretched along the smaller
   curvature's direction: as narrow across the ridge as the 24-point rung, with four times its
   points; a short ridge rung takes its 96 points from the 192 nearest only, so it is shorter
-  and wider. Their patches and the circular rungs' are not nested (a ridge rung is narrower
-  and longer than the 48-point rung), so each judges only what its patch cannot bias more
-  than the other's (:func:`_witnesses`): a wider circular rung the ridge rung's curvature
-  along the ridge, the ridge rung the short one's across it; beside a tight, nearly
-  cylindrical ridge the normal fits, whose stage-1 normals are smoothed there, are not used
-  (:data:`RIDGE_TURN`);
+  and wider; beside the tightest ridges a long one fits 192 points from the 1,536 nearest
+  (:data:`RIDGE_LONG_TURN`), as narrow as the ridge rung and twice as long. Their patches and
+  the circular rungs' are not nested (a ridge rung is narrower and longer than the 48-point
+  rung), so each judges only what its patch cannot bias more than the other's
+  (:func:`_witnesses`): a wider rung the ridge rung's curvature along the ridge, the ridge
+  rung the short one's across it; beside a tight, nearly cylindrical ridge the normal fits,
+  whose stage-1 normals are smoothed there, are not used (:data:`RIDGE_TURN`);
 * the largest fit is kept whose k1 and k2 agree with those of every smaller fit within ``gamma
   (sigma_s + sigma_r)`` (Lepski's rule: its bias is not visible above the noise of any smaller fit;
   the 24-point fit only checks the 48-point one, and a normal quadric that misfits its
@@ -105,6 +106,21 @@ RIDGE_POOL = 384
 #: the ridge rung's wider interval lets pass (the box's fillets +18 % without it).
 KIND_MONGE_RIDGE_SHORT = 4
 RIDGE_SHORT_POOL = 192
+#: The long ridge rung: 192 points at aspect RIDGE_LONG_ASPECT from the nearest
+#: RIDGE_LONG_POOL (whose ball cuts the patch to about twice the ridge rung's length at 0.9 of
+#: its width), fitted only beside a significant, nearly cylindrical ridge whose framing rung
+#: turns its normal by more than RIDGE_LONG_TURN over its patch (``|k| h``; the bench blade's
+#: leading edge 0.94 to 1.17, the filleted box's fillets 0.40 to 0.53, where it reached the
+#: corners along the fillets: fillets +10 % at 0.05 % noise without the test). Beside the
+#: bench blade's leading edge (radius 2.6 spacings, 0.1 % noise) it halves the ridge rung's
+#: noise where every shorter patch's is the error: mean of the larger of the k1 and k2
+#: errors 0.66 -> 0.42 (seeds 1 and 2). Lists are that long only where an anchor asks for it
+#: (``longer`` of :func:`multiscale_anchor_fits`). Calibration 3.3: measured 3.29 on a
+#: 20,000-point cylinder and 3.18 on a sphere at 0.1 % noise (the ridge rung's 3.85, 3.80).
+KIND_MONGE_RIDGE_LONG = 5
+RIDGE_LONG_POOL = 1536
+RIDGE_LONG_ASPECT = 16.0
+RIDGE_LONG_TURN = 0.7
 #: How a smaller fit judges a larger one in Lepski's rule (``witness`` of :func:`_witnesses`):
 #: not at all (0), by k1 and k2 (1), by the curvature smaller in magnitude only (ALONG: a
 #: circular rung wider across a ridge than the ridge rung, whose curvature across it the
@@ -118,6 +134,13 @@ ACROSS = 3
 #: sigma is 0.7 to 1.15 times the 48-point rung's; on the filleted box's fillets, where its
 #: patch reaches a corner along the fillet, 1.7 to 3.5 times).
 RIDGE_GROWTH = 1.3
+#: The same for the long ridge rung against every fit below it (all wider across the ridge):
+#: by its formula its sigma is 2.4 to 3.7 times the 96-point ridge rungs' and 1.1 to 1.5 times
+#: the 24-point rung's beside the bench blade's leading edge, where its error is the least
+#: (with the 24-point rung a peer, 29 of the edge's 143 points kept a 96-point rung: 0.471
+#: instead of 0.434). 6 leaves room above the largest ratio measured; at 3 (with the
+#: ridge rungs' calibration, 4.1) the edge read 0.453 over seeds 1 and 2, 0.418 now.
+RIDGE_LONG_GROWTH = 6.0
 #: ... where the ridge is real: the widest circular rung below the ridge rung reads its larger
 #: curvature above this many of its standard errors (the bench blade's leading edge 15 to 20,
 #: the filleted box's fillets about 40). On a noisy plane a 48-point rung frames a ridge by
@@ -160,7 +183,7 @@ RUNGS = {
     "refine": ((96, KIND_NORMAL_QUADRIC, 1.9), (192, KIND_NORMAL_QUADRIC, 2.6)),
     "fit": ((24, KIND_MONGE_CIRCULAR, 6.7), (48, KIND_MONGE_CIRCULAR, 5.5),
             (96, KIND_MONGE_RIDGE, 4.1), (96, KIND_MONGE_RIDGE_SHORT, 4.1),
-            (96, KIND_MONGE_CIRCULAR, 5.0),
+            (192, KIND_MONGE_RIDGE_LONG, 3.3), (96, KIND_MONGE_CIRCULAR, 5.0),
             (96, KIND_NORMAL_QUADRIC, 1.9), (192, KIND_NORMAL_QUADRIC, 2.6)),
 }
 #: The default tops of each pass, ``(neighbors, calibration)``: full fits (both models)
@@ -252,6 +275,9 @@ DESIGN_SLACK = 1.6
 #: (p99 6.4) against 1.24 inside; with RIDGE_DESIGN_SLACK 1.24 (p99 5.0), as inside (both
 #: measured at aspect 2).
 DESIGN_RIDGE = 37.0
+#: ... and for the long ridge rung's (192 of 1536 points in a ball, aspect 16): median 217,
+#: 99.5th percentile 317, cut along the ridge 866.
+DESIGN_RIDGE_LONG = 217.0
 RIDGE_DESIGN_SLACK = 1.25
 #: Only a patch whose points lie to one side of the anchor (:func:`one_sided` above this; a
 #: half-disk's is 0.85, an inner 48-point patch's rarely above 0.45) is taken for one cut by
@@ -317,7 +343,10 @@ def pass_rungs(k: int, stage: str, fallback: int | None = None) -> tuple[np.ndar
     for size in sizes:
         calib = next((t[1] for t in defaults if t[0] >= size), defaults[-1][1])
         tops.append((size, max(1, size // TOP_POINTS), calib))
-    ladder = [r for r in rungs if r[0] < tops[0][0]]
+    # A ridge rung's patch is not a prefix of the list: the long one is tried wherever the
+    # 96-point ones are.
+    ridge = min((r[0] for r in rungs if r[1] == KIND_MONGE_RIDGE), default=tops[0][0])
+    ladder = [r for r in rungs if (ridge if r[1] == KIND_MONGE_RIDGE_LONG else r[0]) < tops[0][0]]
     return (np.asarray([r[0] for r in ladder], np.int64),
             np.asarray([r[1] for r in ladder], np.int64),
             np.asarray([t[0] for t in tops], np.int64),
@@ -468,9 +497,9 @@ def design_spread(xs, axes):
 
 
 @njit(cache=True)
-def _ridge_patch(points, p, nbr, count, frame):
+def _ridge_patch(points, p, nbr, count, frame, aspect):
     """The ``count`` points of ``nbr`` nearest to p in the metric that shrinks distances along
-    ``frame[1]`` (a ridge's direction) by :data:`RIDGE_ASPECT`, and the RMS spread of
+    ``frame[1]`` (a ridge's direction) by ``aspect``, and the RMS spread of
     their offsets across it, times sqrt 2 (the RMS distance of an isotropic patch of that
     width, the ``h`` of :func:`scale_sigma`)."""
     pool = nbr.shape[0]
@@ -478,7 +507,7 @@ def _ridge_patch(points, p, nbr, count, frame):
     px, py, pz = points[p, 0], points[p, 1], points[p, 2]
     for i in range(pool):
         x, y, z = points[nbr[i], 0] - px, points[nbr[i], 1] - py, points[nbr[i], 2] - pz
-        a = (x * frame[1, 0] + y * frame[1, 1] + z * frame[1, 2]) / RIDGE_ASPECT
+        a = (x * frame[1, 0] + y * frame[1, 1] + z * frame[1, 2]) / aspect
         b = x * frame[2, 0] + y * frame[2, 1] + z * frame[2, 2]
         c = x * frame[0, 0] + y * frame[0, 1] + z * frame[0, 2]
         metric[i] = a * a + b * b + c * c
@@ -510,8 +539,9 @@ def _to_unit(quad, h, unit):
 
 
 @njit(cache=True)
-def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out):
-    """Every rung's fit at one anchor (rungs not smaller than the full list are skipped).
+def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out, fit_long=True):
+    """Every rung's fit at one anchor (rungs not smaller than the full list are skipped; the
+    long ridge rung only with ``fit_long``).
 
     Parameters
     ----------
@@ -543,17 +573,23 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out):
         spread = 0.0
         inflate = 1.0
         misfit = 0.0
-        if kinds[li] == KIND_MONGE_RIDGE or kinds[li] == KIND_MONGE_RIDGE_SHORT:
-            # A ridge rung needs the directions of a smaller fit and a list twice its size.
-            if not framed or 2 * s > nbr.shape[0]:
+        if kinds[li] == KIND_MONGE_RIDGE or kinds[li] == KIND_MONGE_RIDGE_SHORT or \
+                kinds[li] == KIND_MONGE_RIDGE_LONG:
+            # A ridge rung needs the directions of a smaller fit and a list twice its size
+            # (the long one its whole pool, or every point of the cloud).
+            long = kinds[li] == KIND_MONGE_RIDGE_LONG
+            if not framed or 2 * s > nbr.shape[0] or long and (
+                    not fit_long or nbr.shape[0] < min(RIDGE_LONG_POOL, points.shape[0] - 1)):
                 continue
-            pool = nbr[:min(nbr.shape[0], RIDGE_SHORT_POOL if kinds[li] == KIND_MONGE_RIDGE_SHORT
-                            else RIDGE_POOL)]
-            patch, spread = _ridge_patch(points, p, pool, s, frame)
+            pool_size = RIDGE_LONG_POOL if long else \
+                RIDGE_SHORT_POOL if kinds[li] == KIND_MONGE_RIDGE_SHORT else RIDGE_POOL
+            patch, spread = _ridge_patch(points, p, nbr[:min(nbr.shape[0], pool_size)], s,
+                                         frame, RIDGE_LONG_ASPECT if long else RIDGE_ASPECT)
             st, h, d, c1, c2, design, side = _monge_rung(points, field, p, patch, quads[li],
                                                          CIRCULAR_ROUNDS, scratch)
             if side > BORDER_SIDE:
-                inflate = max(1.0, design / (RIDGE_DESIGN_SLACK * DESIGN_RIDGE))
+                inflate = max(1.0, design / (RIDGE_DESIGN_SLACK *
+                                             (DESIGN_RIDGE_LONG if long else DESIGN_RIDGE)))
             if st == OK and spread > 0.0:
                 h = _to_unit(quads[li], h, spread)
         elif s >= nbr.shape[0]:
@@ -611,7 +647,7 @@ def _agree(est, sg, a, b, gamma, part=1):
 
 
 @njit(cache=True)
-def _lepski(est, sg, grow, gamma, growth, first_top, witness, nested, peer):
+def _lepski(est, sg, grow, gamma, growth, first_top, witness, nested, peer, long_rung=-1):
     """Index of the fit to keep: the largest whose k1 and k2 agree with those of every smaller
     fit within ``gamma`` times the sum of both sigmas, and whose sigma is at most ``growth``
     times the smallest sigma below it (a ladder rung: :data:`RUNG_GROWTH` times; -1 when none
@@ -624,7 +660,8 @@ def _lepski(est, sg, grow, gamma, growth, first_top, witness, nested, peer):
     circular Monge rung with the one below it (``nested``, :func:`nested_rungs`, within
     :data:`NESTED_AGREEMENT`). A fit r judges a larger fit c only where ``witness[c, r]``,
     and only in the curvatures it names; a sigma r not ``peer[c, r]`` counts
-    :data:`RIDGE_GROWTH` times in c's growth test (:func:`_witnesses`).
+    :data:`RIDGE_GROWTH` times in c's growth test (:func:`_witnesses`), or
+    :data:`RIDGE_LONG_GROWTH` times where c is ``long_rung`` (the long ridge rung's index).
 
     Each candidate is compared with every smaller rung directly, not with a running intersection, so
     one chance disagreement between two noisy small fits does not stop the selection at the smallest
@@ -645,7 +682,9 @@ def _lepski(est, sg, grow, gamma, growth, first_top, witness, nested, peer):
         for r in range(c):
             if not np.isfinite(sg[r]):
                 continue
-            smallest = min(smallest, grow[r] * (1.0 if peer[c, r] else RIDGE_GROWTH))
+            allowed = 1.0 if peer[c, r] else \
+                RIDGE_LONG_GROWTH if c == long_rung else RIDGE_GROWTH
+            smallest = min(smallest, grow[r] * allowed)
             if witness[c, r] == 0:
                 continue
             if not _agree(est, sg, c, r, gamma, witness[c, r]):
@@ -829,6 +868,9 @@ def _witnesses(est, sg, kinds, t_status, t_model, levels):
       it nor weighs their disagreement as its bias;
     - the ridge rung judges the short ridge rung in the curvature across the ridge only
       (:data:`ACROSS`);
+    - every rung below the long ridge rung is wider across the ridge: the 24-point rung
+      judges it in full, the other positional rungs along the ridge only, and none is its
+      peer (:data:`RIDGE_LONG_GROWTH`);
 
     and at the tops:
 
@@ -861,6 +903,13 @@ def _witnesses(est, sg, kinds, t_status, t_model, levels):
         for r in range(c + 1, levels):
             if kinds[r] == KIND_MONGE_RIDGE_SHORT:  # shorter along it, wider across
                 witness[r, c] = ACROSS
+            elif kinds[r] == KIND_MONGE_RIDGE_LONG:  # as long, narrower across than all
+                witness[r, 0] = 1
+                peer[r, 0] = False
+                for q in range(1, r):
+                    if kinds[q] != KIND_NORMAL_QUADRIC:
+                        witness[r, q] = ALONG
+                        peer[r, q] = False
     for t in range(t_status.shape[0]):
         if t_status[t] != OK or t_model[t] != MODEL_FIELD:
             continue
@@ -874,7 +923,8 @@ def _witnesses(est, sg, kinds, t_status, t_model, levels):
 @njit(parallel=True, cache=True)
 def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, ladder, kinds,
                            tops, strides, gamma, growth, calib, side_limit, coef, scale, frame,
-                           quad, quad_scale, model, residual, status, chosen, sigma, bias):
+                           quad, quad_scale, model, residual, status, chosen, sigma, bias,
+                           longer):
     """Fits at anchors with the neighborhood size chosen per anchor (module docstring).
 
     Parameters
@@ -912,17 +962,26 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
     bias : ndarray, shape (a, 2)
         Output: the kept fit's bias of k1 and of k2 as the smaller fits show it
         (:func:`_reported_bias`; 0 when none disagrees beyond their errors).
+    longer : ndarray, shape (a,), bool
+        Output: whether the anchor would fit the long ridge rung (:data:`RIDGE_LONG_TURN`)
+        but its list is shorter than :data:`RIDGE_LONG_POOL` (and than the cloud): fitted
+        again from such a list, it may keep that rung (every other fit reads the same).
     """
     levels = ladder.shape[0]
     ntop = tops.shape[0]
     nested = nested_rungs(kinds, ntop)
+    long_rung = -1
+    for li in range(levels):
+        if kinds[li] == KIND_MONGE_RIDGE_LONG:
+            long_rung = li
     for j in prange(anchors.shape[0]):
         p = anchors[j]
         nbr = indices[indptr[j]:indptr[j + 1]]
         full = nbr.shape[0]
         quads = np.empty((levels, N_QUAD))
         est = np.empty((levels + ntop, 8))
-        ladder_estimates(points, field, p, nbr, ladder, kinds, quads, est)
+        # (the long ridge rung only where it is wanted, below: its pool is most of a long list)
+        ladder_estimates(points, field, p, nbr, ladder, kinds, quads, est, False)
         # Every top's full fit (both models) into scratch rows; the kept one is copied out.
         t_coef = np.empty((ntop,) + coef.shape[1:])
         t_quad = np.empty((ntop, N_QUAD))
@@ -980,20 +1039,34 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
                     (kinds[li] == KIND_MONGE_RIDGE) == short_only and \
                     not _significant_ridge(est, sg, kinds, li):
                 sg[li] = grow[li] = np.inf
+        wanted = False  # a long ridge rung (RIDGE_LONG_TURN)
         for li in range(levels):
             if kinds[li] == KIND_MONGE_RIDGE and _tight_ridge(est, sg, kinds, li):
                 for r in range(levels + ntop):  # no normal fit (RIDGE_TURN)
                     if r >= levels or kinds[r] == KIND_NORMAL_QUADRIC:
                         sg[r] = grow[r] = np.inf
+                r = _framing_rung(est, sg, kinds, li)
+                wanted = max(abs(est[r, 1]), abs(est[r, 2])) * est[r, 5] > RIDGE_LONG_TURN
+        longer[j] = False
+        if wanted and long_rung >= 0:
+            longer[j] = full < min(RIDGE_LONG_POOL, points.shape[0] - 1)
+            if not longer[j]:  # the same fits again, and the long rung
+                ladder_estimates(points, field, p, nbr, ladder, kinds, quads, est, True)
+                if est[long_rung, 0] == 1.0:
+                    sg[long_rung] = scale_sigma(est[long_rung, 3], est[long_rung, 5],
+                                                sizes[long_rung], calib[long_rung])
+                    sg[long_rung] *= est[long_rung, 6]
+                    grow[long_rung] = sg[long_rung]
         witness, peer = _witnesses(est, sg, kinds, t_status, t_model, levels)
-        best = _lepski(est, sg, grow, gamma, growth, levels, witness, nested, peer)
+        best = _lepski(est, sg, grow, gamma, growth, levels, witness, nested, peer, long_rung)
         if best < 0:  # nothing else usable: the noise-limited Monge rungs (ladder_estimates)
             for li in range(levels):
                 if est[li, 0] == 2.0:
                     sg[li] = (scale_sigma(est[li, 3], est[li, 5], sizes[li], calib[li])
                               * est[li, 6])
                     grow[li] = sg[li]
-            best = _lepski(est, sg, grow, gamma, growth, levels, witness, nested, peer)
+            best = _lepski(est, sg, grow, gamma, growth, levels, witness, nested, peer,
+                           long_rung)
         if best > 0:
             best = _least_error(est, sg, best, kinds, gamma, peer)
         # The top to report when nothing is usable: the largest that fitted, else the first
