@@ -108,16 +108,21 @@ def test_a_leading_edge_of_2_6_spacings_reads_its_long_ridge_rung():
     assert np.mean(res.neighbor_count[edge] == 192) > 0.8
 
 
+def _narrow_cylinder(height):
+    """A unit cylinder sampled 2.6 points per radius, its point at mid-height and every
+    point's index sorted by distance from it."""
+    spacing = 1.0 / 2.6
+    n = int(round(2.0 * np.pi * height / spacing ** 2))
+    cyl = synthetic.cylinder(n, radius=1.0, height=height, seed=3)
+    p = int(np.argmin(np.abs(cyl.points[:, 2])))
+    return cyl, p, np.argsort(np.linalg.norm(cyl.points - cyl.points[p], axis=1)), spacing
+
+
 def test_a_ridge_rung_is_judged_by_its_width_not_its_length():
     # a cylinder of 2.6 spacings' radius: the 96-point patch stretched along its axis is about
     # 8 spacings long, so |k| times its RMS distance exceeds SUPPORT, though the rung reads the
     # curvature across it well (width about 2 spacings); noise-free it reads 1.03 for 1
-    spacing = 1.0 / 2.6
-    height = 40.0
-    n = int(round(2.0 * np.pi * height / spacing ** 2))
-    cyl = synthetic.cylinder(n, radius=1.0, height=height, seed=3)
-    p = int(np.argmin(np.abs(cyl.points[:, 2])))
-    order = np.argsort(np.linalg.norm(cyl.points - cyl.points[p], axis=1))
+    cyl, p, order, spacing = _narrow_cylinder(40.0)
     nbr = order[1:385].astype(np.int64)
     ladder = np.array([48, 96], np.int64)
     kinds = np.array([scale_selection.KIND_MONGE_CIRCULAR, scale_selection.KIND_MONGE_RIDGE],
@@ -388,12 +393,7 @@ def test_a_long_ridge_rung_fits_only_from_a_list_as_long_as_its_pool():
     # a cylinder of 2.6 spacings' radius: from the 384 nearest (a refit's list) the long
     # ridge rung is not fitted; from RIDGE_LONG_POOL it reads the curvature across the axis,
     # no wider across than the 96-point ridge rung
-    spacing = 1.0 / 2.6
-    height = 80.0
-    n = int(round(2.0 * np.pi * height / spacing ** 2))
-    cyl = synthetic.cylinder(n, radius=1.0, height=height, seed=3)
-    p = int(np.argmin(np.abs(cyl.points[:, 2])))
-    order = np.argsort(np.linalg.norm(cyl.points - cyl.points[p], axis=1))
+    cyl, p, order, _ = _narrow_cylinder(80.0)
     kinds = np.array([scale_selection.KIND_MONGE_CIRCULAR, scale_selection.KIND_MONGE_RIDGE,
                       scale_selection.KIND_MONGE_RIDGE_LONG], np.int64)
     ladder = np.array([48, 96, 192], np.int64)
@@ -489,6 +489,27 @@ def test_normal_fits_sit_out_beside_a_tight_cylindrical_ridge():
     est[ridge, 2] = 0.0
     sg[ridge] = np.inf  # unusable
     assert not scale_selection._tight_ridge(est, sg, kinds, ridge)
+
+
+def test_normal_fits_sit_out_beside_a_tight_cap():
+    # a filleted box's corner (k1 = k2 = 5, the 48-point rung's RMS radius 0.09): the
+    # 96-point normal quadric read it 16 % low with a sigma of 0.06 (corners at 0.1 %:
+    # 0.556 -> 0.510 without the normal fits there, stop 43)
+    kinds, levels, ridge, short, est, sg = _edge_ladder(15.0)
+    est[1, 1:3] = 5.2, 4.8
+    sg[1] = 0.2
+    sg[ridge] = sg[short] = np.inf  # no ridge framed: no ridge rungs
+    est[1, 5] = 0.09
+    assert scale_selection._tight_cap(est, sg, kinds, ridge)
+    assert not scale_selection._tight_ridge(est, sg, kinds, ridge)
+    est[1, 5] = 0.9 * scale_selection.RIDGE_TURN / 5.2  # a gentle cap (a sphere)
+    assert not scale_selection._tight_cap(est, sg, kinds, ridge)
+    est[1, 5] = 0.09
+    est[1, 2] = 0.4 * 5.2  # unequal curvatures (an ellipsoid's end): not a cap
+    assert not scale_selection._tight_cap(est, sg, kinds, ridge)
+    est[1, 2] = 4.8
+    sg[1] = 5.2 / scale_selection.RIDGE_SIGNIFICANCE * 1.1  # not significant
+    assert not scale_selection._tight_cap(est, sg, kinds, ridge)
 
 
 def test_a_circular_rung_must_agree_closely_with_the_one_inside_it():
