@@ -312,10 +312,10 @@ WITNESS_MISFIT = 1.0
 #: 0.28 -> 0.49 with the 96-point rung and gamma alone, 0.35 with this at 2).
 NESTED_AGREEMENT = 2.0
 #: A smaller rung's disagreement with a wider fit counts only where the widest circular rung
-#: (of at least CONFIRM_SIZE points; wider than every positional rung but the long ridge
-#: rung's length) confirms it: where that rung reads no curvature beyond CONFIRM_FLAT of its
-#: standard errors and agrees with the wider fit within CONFIRM_AGREEMENT times their summed
-#: sigmas, the smaller rung's reading is taken for chance (:func:`_unconfirmed`). Every
+#: (of at least CONFIRM_SIZE points: the widest isotropic positional patch) confirms it:
+#: where that rung reads no curvature beyond CONFIRM_FLAT of its standard errors and agrees
+#: with the wider fit within CONFIRM_AGREEMENT times their summed sigmas, the smaller rung's
+#: reading is taken for chance (:func:`_unconfirmed`). Every
 #: anchor tests each wide fit against several smaller rungs, so among a cloud's thousands
 #: some read 4 of their standard errors by chance: on 10,000-point planes at 0.1 % noise
 #: (seeds 1 to 8) a 48-point rung read -2.5 with a sigma of 0.62 and turned every wider fit
@@ -960,7 +960,7 @@ def _witnesses(est, sg, kinds, t_status, t_model, levels):
         for r in range(c + 1, levels):
             if kinds[r] == KIND_MONGE_RIDGE_SHORT:  # shorter along it, wider across
                 witness[r, c] = ACROSS
-            elif kinds[r] == KIND_MONGE_RIDGE_LONG:  # as long, narrower across than all
+            elif kinds[r] == KIND_MONGE_RIDGE_LONG:  # narrower across than every rung below
                 witness[r, 0] = 1
                 peer[r, 0] = False
                 for q in range(1, r):
