@@ -563,6 +563,52 @@ def _to_unit(quad, h, unit):
 
 
 @njit(cache=True)
+def _store_rung(row, st, c1, c2, d, h, spread, inflate, misfit, positional):
+    """One rung's fit into its row of :func:`ladder_estimates`' ``out`` (left unusable where
+    the fit failed or its curvature is not supported)."""
+    if st != OK or not supported(c1, c2, h):
+        return
+    # A height fit within noise comparable to its patch is biased, not noisy: a last
+    # resort (ok = 2), used only where no other fit is.
+    if spread == 0.0:
+        spread = h
+    limited = positional and d > MONGE_NOISE_LIMIT * spread
+    row[0] = 2.0 if limited else 1.0
+    row[1] = c1
+    row[2] = c2
+    row[3] = d
+    row[4] = h
+    row[5] = spread
+    row[6] = inflate
+    row[7] = misfit
+
+
+@njit(cache=True)
+def _ridge_rung(points, field, p, nbr, s, kind, frame, quad, row):
+    """A ridge rung's fit (``kind``, ``s`` points) at anchor p into ``quad`` and ``row`` (as
+    :func:`ladder_estimates`' ``out``), its patch stretched along ``frame[1]`` (the
+    directions of the circular rung that framed it, :func:`_monge_rung`)."""
+    row[0] = 0.0
+    row[6] = 1.0
+    row[7] = 0.0
+    long = kind == KIND_MONGE_RIDGE_LONG
+    pool_size = RIDGE_LONG_POOL if long else \
+        RIDGE_SHORT_POOL if kind == KIND_MONGE_RIDGE_SHORT else RIDGE_POOL
+    patch, spread = _ridge_patch(points, p, nbr[:min(nbr.shape[0], pool_size)], s, frame,
+                                 RIDGE_LONG_ASPECT if long else RIDGE_ASPECT)
+    scratch = np.empty((3, 3))  # the ridge rung's own frame, unused
+    st, h, d, c1, c2, design, side = _monge_rung(points, field, p, patch, quad,
+                                                 CIRCULAR_ROUNDS, scratch)
+    inflate = 1.0
+    if side > BORDER_SIDE:
+        inflate = max(1.0, design / (RIDGE_DESIGN_SLACK *
+                                     (DESIGN_RIDGE_LONG if long else DESIGN_RIDGE)))
+    if st == OK and spread > 0.0:
+        h = _to_unit(quad, h, spread)
+    _store_rung(row, st, c1, c2, d, h, spread, inflate, 0.0, True)
+
+
+@njit(cache=True)
 def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out, fit_long=True):
     """Every rung's fit at one anchor (rungs not smaller than the full list are skipped; the
     long ridge rung only with ``fit_long``).
@@ -583,10 +629,18 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out, fit_long=
         uses (h), the factor its standard error grows by where its patch is cut by
         the cloud's border (Monge rungs, :data:`DESIGN_SLACK` or :data:`RIDGE_DESIGN_SLACK`;
         else 1) and the normal misfit of a normal-quadric rung (0 for the others).
+    fit_long : bool
+        Whether to fit the long ridge rung (else it is left unusable; :func:`_ridge_rung` fits
+        it later from the frame returned).
+
+    Returns
+    -------
+    ridge_frame : ndarray, shape (3, 3)
+        The frame the long ridge rung's patch is stretched along (NaN where none framed it).
     """
     origin = np.zeros(3)
     frame = np.empty((3, 3))
-    scratch = np.empty((3, 3))  # the ridge rung's own frame, unused
+    ridge_frame = np.full((3, 3), np.nan)
     framed = False  # whether frame holds the directions of a circular Monge rung
     nested = nested_rungs(kinds, 0)
     for li in range(ladder.shape[0]):
@@ -602,20 +656,12 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out, fit_long=
             # A ridge rung needs the directions of a smaller fit and a list twice its size
             # (the long one its whole pool, or every point of the cloud).
             long = kinds[li] == KIND_MONGE_RIDGE_LONG
-            if not framed or 2 * s > nbr.shape[0] or long and (
-                    not fit_long or nbr.shape[0] < min(RIDGE_LONG_POOL, points.shape[0] - 1)):
-                continue
-            pool_size = RIDGE_LONG_POOL if long else \
-                RIDGE_SHORT_POOL if kinds[li] == KIND_MONGE_RIDGE_SHORT else RIDGE_POOL
-            patch, spread = _ridge_patch(points, p, nbr[:min(nbr.shape[0], pool_size)], s,
-                                         frame, RIDGE_LONG_ASPECT if long else RIDGE_ASPECT)
-            st, h, d, c1, c2, design, side = _monge_rung(points, field, p, patch, quads[li],
-                                                         CIRCULAR_ROUNDS, scratch)
-            if side > BORDER_SIDE:
-                inflate = max(1.0, design / (RIDGE_DESIGN_SLACK *
-                                             (DESIGN_RIDGE_LONG if long else DESIGN_RIDGE)))
-            if st == OK and spread > 0.0:
-                h = _to_unit(quads[li], h, spread)
+            if long and framed:
+                ridge_frame[:] = frame
+            if framed and 2 * s <= nbr.shape[0] and not (long and not (
+                    fit_long and _long_pool(nbr.shape[0], points.shape[0]))):
+                _ridge_rung(points, field, p, nbr, s, kinds[li], frame, quads[li], out[li])
+            continue
         elif s >= nbr.shape[0]:
             continue
         elif kinds[li] != KIND_NORMAL_QUADRIC:
@@ -637,21 +683,16 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out, fit_long=
                                                       quads[li])
             if st == OK:
                 st, c1, c2, _, _, _ = curvature_from_quadric(quads[li], h, origin, FOOT_LIMIT)
-        if st != OK or not supported(c1, c2, h):
-            continue
-        # A height fit within noise comparable to its patch is biased, not noisy: a last
-        # resort (ok = 2), used only where no other fit is.
-        if spread == 0.0:
-            spread = h
-        limited = kinds[li] != KIND_NORMAL_QUADRIC and d > MONGE_NOISE_LIMIT * spread
-        out[li, 0] = 2.0 if limited else 1.0
-        out[li, 1] = c1
-        out[li, 2] = c2
-        out[li, 3] = d
-        out[li, 4] = h
-        out[li, 5] = spread
-        out[li, 6] = inflate
-        out[li, 7] = misfit
+        _store_rung(out[li], st, c1, c2, d, h, spread, inflate, misfit,
+                    kinds[li] != KIND_NORMAL_QUADRIC)
+    return ridge_frame
+
+
+@njit(cache=True)
+def _long_pool(listed, n):
+    """Whether a list of ``listed`` neighbors in a cloud of ``n`` points holds the long ridge
+    rung's pool (:data:`RIDGE_LONG_POOL`, or every other point)."""
+    return listed >= min(RIDGE_LONG_POOL, n - 1)
 
 
 @njit(cache=True)
@@ -878,16 +919,31 @@ def _significant_ridge(est, sg, kinds, c):
 
 
 @njit(cache=True)
+def _turn(est, r):
+    """How far fit ``r`` turns its normal over its patch: its larger curvature times its RMS
+    radius (rad)."""
+    return max(abs(est[r, 1]), abs(est[r, 2])) * est[r, 5]
+
+
+@njit(cache=True)
+def _tight_framing(est, sg, kinds, c):
+    """The rung that framed ridge rung ``c`` where it reads a significant curvature turning
+    its normal by more than :data:`RIDGE_TURN` (-1: none)."""
+    if not _significant_ridge(est, sg, kinds, c):
+        return -1
+    r = _framing_rung(est, sg, kinds, c)
+    return r if _turn(est, r) > RIDGE_TURN else -1
+
+
+@njit(cache=True)
 def _tight_ridge(est, sg, kinds, c):
     """Whether usable ridge rung ``c`` reads a significant, tight, nearly cylindrical ridge
     (:data:`RIDGE_CYLINDRICAL`, :data:`RIDGE_TURN`)."""
-    if not np.isfinite(sg[c]) or not _significant_ridge(est, sg, kinds, c):
+    if not np.isfinite(sg[c]):
         return False
     big = max(abs(est[c, 1]), abs(est[c, 2]))
-    if not min(abs(est[c, 1]), abs(est[c, 2])) < RIDGE_CYLINDRICAL * big:
-        return False
-    r = _framing_rung(est, sg, kinds, c)
-    return max(abs(est[r, 1]), abs(est[r, 2])) * est[r, 5] > RIDGE_TURN
+    return min(abs(est[c, 1]), abs(est[c, 2])) < RIDGE_CYLINDRICAL * big and \
+        _tight_framing(est, sg, kinds, c) >= 0
 
 
 @njit(cache=True)
@@ -897,12 +953,9 @@ def _tight_cap(est, sg, kinds, c):
     the larger: no ridge is framed) and turning its normal by more than :data:`RIDGE_TURN`
     over its patch (a filleted box's corners, whose stage-1 normals are smoothed as a tight
     ridge's are)."""
-    r = _framing_rung(est, sg, kinds, c)
-    if r < 0:
-        return False
-    big = max(abs(est[r, 1]), abs(est[r, 2]))
-    return big > RIDGE_SIGNIFICANCE * sg[r] and big * est[r, 5] > RIDGE_TURN and \
-        min(abs(est[r, 1]), abs(est[r, 2])) > RIDGE_RATIO * big
+    r = _tight_framing(est, sg, kinds, c)
+    return r >= 0 and min(abs(est[r, 1]), abs(est[r, 2])) > \
+        RIDGE_RATIO * max(abs(est[r, 1]), abs(est[r, 2]))
 
 
 @njit(cache=True)
@@ -1041,7 +1094,7 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
         quads = np.empty((levels, N_QUAD))
         est = np.empty((levels + ntop, 8))
         # (the long ridge rung only where it is wanted, below: its pool is most of a long list)
-        ladder_estimates(points, field, p, nbr, ladder, kinds, quads, est, False)
+        ridge_frame = ladder_estimates(points, field, p, nbr, ladder, kinds, quads, est, False)
         # Every top's full fit (both models) into scratch rows; the kept one is copied out.
         t_coef = np.empty((ntop,) + coef.shape[1:])
         t_quad = np.empty((ntop, N_QUAD))
@@ -1109,13 +1162,13 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
                     if r >= levels or kinds[r] == KIND_NORMAL_QUADRIC:
                         sg[r] = grow[r] = np.inf
             if ridge:
-                r = _framing_rung(est, sg, kinds, li)
-                wanted = max(abs(est[r, 1]), abs(est[r, 2])) * est[r, 5] > RIDGE_LONG_TURN
+                wanted = _turn(est, _framing_rung(est, sg, kinds, li)) > RIDGE_LONG_TURN
         longer[j] = False
         if wanted and long_rung >= 0:
-            longer[j] = full < min(RIDGE_LONG_POOL, points.shape[0] - 1)
-            if not longer[j]:  # the same fits again, and the long rung
-                ladder_estimates(points, field, p, nbr, ladder, kinds, quads, est, True)
+            longer[j] = not _long_pool(full, points.shape[0])
+            if not longer[j] and 2 * ladder[long_rung] <= full:
+                _ridge_rung(points, field, p, nbr, ladder[long_rung], KIND_MONGE_RIDGE_LONG,
+                           ridge_frame, quads[long_rung], est[long_rung])
                 if est[long_rung, 0] == 1.0:
                     sg[long_rung] = scale_sigma(est[long_rung, 3], est[long_rung, 5],
                                                 sizes[long_rung], calib[long_rung])
