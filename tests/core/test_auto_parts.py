@@ -510,6 +510,14 @@ def test_normal_fits_sit_out_beside_a_tight_cap():
     est[1, 2] = 4.8
     sg[1] = 5.2 / scale_selection.RIDGE_SIGNIFICANCE * 1.1  # not significant
     assert not scale_selection._tight_cap(est, sg, kinds, ridge)
+    # the 24-point rung alone (the 48-point one unusable) does not read a cap: its chance
+    # readings took the normal fits from a noisy cylinder (0.5 %: +7 %)
+    sg[1] = np.inf
+    est[0, 1:3] = 5.2, 4.8
+    est[0, 5] = 0.09
+    sg[0] = 0.2
+    assert scale_selection._framing_rung(est, sg, kinds, ridge) == 0
+    assert not scale_selection._tight_cap(est, sg, kinds, ridge)
 
 
 def test_a_circular_rung_must_agree_closely_with_the_one_inside_it():
