@@ -69,6 +69,17 @@ from ..fitting.normal_field import (
 )
 from ..fitting.normal_quadric import N_QUAD
 from ..fitting.outliers import ISOLATION_K, isolated, off_surface
+from ..fitting.rounded_edge import (
+    EDGE_FAN_K,
+    EDGE_FLAT,
+    EDGE_KEEP,
+    EDGE_LADDER,
+    EDGE_NORMAL_K,
+    FAN_MIN,
+    edge_circle_fits,
+    read_edge_circles,
+    wraps,
+)
 from ..fitting.scale_selection import DEFAULT_GAMMA, RIDGE_POOL, multiscale_anchor_fits
 from ..fitting.shifted import adopt_neighbor_fits
 from ..memory import release_freed_memory
@@ -708,6 +719,7 @@ class AutoRun:
         # cloud's thinned share, whose normals come from the whole cloud.
         self.shift_rows = np.empty(0, np.int64)
         self.shifts = np.empty((0, 3))
+        self.edge_candidates = np.empty(0, np.int64)  # points tried for a rounded edge
         # RMS neighbor distance of each clean fit (its standard error's unit)
         self.clean_h = np.empty(points.shape[0]) if self.plan.clean else None
         # Whether the fits may reach beyond BASE_K (fit_k); not on a dense cloud's thinned
@@ -862,6 +874,8 @@ class AutoRun:
         rows, shifts = np.concatenate(rows), np.concatenate(shifts)
         sided = (np.empty(0, np.int64) if self.plan.clean
                  else self._normals_of_one_side(field, flat, r_normal, normal_k))
+        # Neighborhoods far from flat: where a rounded edge may be (_rounded_edges).
+        self.edge_candidates = np.flatnonzero((flat >= EDGE_FLAT) & ~self.outliers)
         del flat
         # Offsets of normals refitted without outliers or over one side of a wall, or of
         # outliers, would not match (a wall's two faces make its PCA neighborhoods look cut
@@ -998,6 +1012,7 @@ class AutoRun:
         in_zone[rows] = zone[owner[rows]]
         # stage1[0] now holds the refined normals the second pass fitted.
         own, own_reach = self._refit(res, stage1[0], field_reach, in_zone, kc)
+        edges = self._rounded_edges(rows, kc)
         # The reads below need only the fits: the normals and their radii, and the tree (72
         # bytes a point together), go before the result pages the reads fill are touched.
         stage1.clear()
@@ -1021,6 +1036,113 @@ class AutoRun:
             d = np.linalg.norm(self.points[rows] - self.points[reps[owner[rows]]], axis=1)
             self.reach[rows] = d + zone_reach[owner[rows]] + np.sqrt(3.0) * self.plan.cell
             self.reach[own] = np.maximum(self.reach[own], own_reach)
+        if edges is not None:
+            self._store_rounded_edges(res, edges)
+
+    def _rounded_edges(self, rows, kc):
+        """Circle fits across rounded thin edges (:mod:`~curvature.fitting.rounded_edge`) at
+        the points of ``rows`` whose stage-1 neighborhood was far from flat
+        (:data:`~curvature.fitting.rounded_edge.EDGE_FLAT`) and whose nearest PCA normals fan
+        out around an axis, over at most ``kc`` neighbors (the fits' largest size: a user's
+        ``k`` holds for them too), read at those points where they lie on their circle. None
+        where no point does, else (points, k1, k2, normals, dir1, dir2, k1's and k2's
+        standard errors, inliers, reach), one row per point.
+        """
+        t0 = time.perf_counter()
+        try:
+            return self._edge_reads(rows, kc)
+        finally:
+            self.timings["rounded edges"] = time.perf_counter() - t0
+
+    def _edge_reads(self, rows, kc):
+        """:meth:`_rounded_edges`."""
+        n = self.points.shape[0]
+        ladder = np.asarray([k for k in EDGE_LADDER if k <= min(n - 1, kc)], np.int64)
+        points = self.edge_candidates[np.isin(self.edge_candidates, rows)]
+        if points.size == 0 or ladder.size == 0:
+            return None
+        normals = np.full((n, 3), np.nan)
+        done = np.zeros(n, bool)
+        fan = min(EDGE_FAN_K, n - 1)
+        wide = [np.empty(0, np.int64)]
+        for sl in self._chunks(points.shape[0]):
+            indptr, indices, _ = knn_csr(self.points, self.tree, points[sl], fan)
+            self._edge_normals(indices, normals, done)
+            wide.append(points[sl][wraps(normals, points[sl], indptr, indices, FAN_MIN)])
+        points = np.concatenate(wide)
+        a = points.shape[0]
+        if a == 0:
+            return None
+        frame, circle = np.empty((a, 3, 3)), np.empty((a, 3))
+        curv, std, arc = np.empty((a, 2)), np.empty((a, 2)), np.empty((a, 2))
+        count, ok, radius = np.zeros(a, np.int64), np.zeros(a, bool), np.empty(a)
+        listed = int(ladder[-1])
+        noise = self._noise()
+        step = max(64, self.chunk_size * 24 // listed)
+        for start in range(0, a, step):
+            at = slice(start, min(start + step, a))
+            indptr, indices, d2 = knn_csr(self.points, self.tree, points[at], listed)
+            self._edge_normals(indices, normals, done)
+            edge_circle_fits(self.points, normals, points[at], indptr, indices, noise, ladder,
+                             frame[at], circle[at], curv[at], std[at], arc[at], count[at],
+                             ok[at])
+            radius[at] = np.sqrt(d2[:, -1])
+        del normals, done
+        if not ok.any():
+            return None
+        points, radius, count = points[ok], radius[ok], count[ok]
+        m = points.shape[0]
+        k1, k2, s1, s2 = np.empty(m), np.empty(m), np.empty(m), np.empty(m)
+        dirs = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3))
+        read = np.zeros(m, bool)
+        read_edge_circles(noise, frame[ok], circle[ok], curv[ok], std[ok], arc[ok], k1, k2,
+                          *dirs, s1, s2, read)
+        if not read.any():
+            return None
+        return (points[read], k1[read], k2[read], *(d[read] for d in dirs), s1[read],
+                s2[read], count[read], radius[read])
+
+    def _edge_normals(self, indices, normals, done) -> None:
+        """PCA normals over :data:`~curvature.fitting.rounded_edge.EDGE_NORMAL_K` neighbors
+        at the points ``indices`` lists that have none yet (``done``), into ``normals`` (n,
+        3): the circle fits'. The stage-1 normals' 48 neighbors turn too little at a leading
+        edge, and the refined normals of a plate's rim mostly do not fan out (rims of the
+        bench's plate: 18 of 55 points passed :func:`wraps` with them, 55 with these)."""
+        at = np.unique(indices)
+        at = at[~done[at]].astype(np.int64)
+        if at.size == 0:
+            return
+        k = min(EDGE_NORMAL_K + 1, self.points.shape[0])
+        _, nbr, _ = knn_csr(self.points, self.tree, at, k)
+        out = np.empty((at.shape[0], 3))
+        pca_normals(self.points, at, *_prefix_csr(nbr.reshape(-1, k)[:, 1:], k - 1), out)
+        normals[at] = out
+        done[at] = True
+
+    def _store_rounded_edges(self, res, edges) -> None:
+        """Write the points' reads of :meth:`_rounded_edges` into ``res``."""
+        r, k1, k2, normals, dir1, dir2, s1, s2, count, reach = edges
+        # The anchored fit stays where it agrees with the circle (its curvatures turned to the
+        # circle's normal): a leading edge of 2.6 spacings, which the long ridge rung reads.
+        flip = np.einsum("ij,ij->i", res.normals[r], normals) < 0.0
+        a1 = np.where(flip, -res.k2[r], res.k1[r])
+        a2 = np.where(flip, -res.k1[r], res.k2[r])
+        with np.errstate(invalid="ignore"):
+            agree = ((np.abs(a1 - k1) <= EDGE_KEEP * s1) & (np.abs(a2 - k2) <= EDGE_KEEP * s2)
+                     & (res.status[r] == Status.OK))
+        new = ~agree
+        r, k1, k2, normals, dir1, dir2, s1, s2, count, reach = (
+            x[new] for x in (r, k1, k2, normals, dir1, dir2, s1, s2, count, reach))
+        res.k1[r], res.k2[r] = k1, k2
+        res.normals[r], res.dir1[r], res.dir2[r] = normals, dir1, dir2
+        res.status[r] = Status.OK
+        res.neighbor_count[r] = count
+        scale = 1.0 / self.plan.spacing
+        res.k1_std[r] = with_floor(s1, k1, k2, scale)
+        res.k2_std[r] = with_floor(s2, k1, k2, scale)
+        res.mean_std[r] = ANCHORED_MEAN_SHARE * np.maximum(res.k1_std[r], res.k2_std[r])
+        if self.track_reach:
+            self.reach[r] = np.fmax(self.reach[r], reach)
 
     def _zone_anchors(self, reps, used):
         """The anchors ``used`` and every anchor within :data:`REFIT_ZONE` cells of one,
