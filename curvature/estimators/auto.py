@@ -72,6 +72,7 @@ from ..fitting.outliers import ISOLATION_K, isolated, off_surface
 from ..fitting.rounded_edge import (
     EDGE_FAN_K,
     EDGE_FLAT,
+    EDGE_FLAT_NOISE,
     EDGE_KEEP,
     EDGE_LADDER,
     EDGE_NORMAL_K,
@@ -874,8 +875,12 @@ class AutoRun:
         rows, shifts = np.concatenate(rows), np.concatenate(shifts)
         sided = (np.empty(0, np.int64) if self.plan.clean
                  else self._normals_of_one_side(field, flat, r_normal, normal_k))
-        # Neighborhoods far from flat: where a rounded edge may be (_rounded_edges).
-        self.edge_candidates = np.flatnonzero((flat >= EDGE_FLAT) & ~self.outliers)
+        # Neighborhoods far from flat, beyond what noise makes of a flat one: where a rounded
+        # edge may be (_rounded_edges).
+        with np.errstate(divide="ignore", invalid="ignore"):
+            noisy = EDGE_FLAT_NOISE * 2.0 * self._noise() ** 2 / (r_normal * r_normal)
+        self.edge_candidates = np.flatnonzero((flat >= np.maximum(EDGE_FLAT, noisy))
+                                              & ~self.outliers)
         del flat
         # Offsets of normals refitted without outliers or over one side of a wall, or of
         # outliers, would not match (a wall's two faces make its PCA neighborhoods look cut
@@ -1042,7 +1047,8 @@ class AutoRun:
     def _rounded_edges(self, rows, kc):
         """Circle fits across rounded thin edges (:mod:`~curvature.fitting.rounded_edge`) at
         the points of ``rows`` whose stage-1 neighborhood was far from flat
-        (:data:`~curvature.fitting.rounded_edge.EDGE_FLAT`) and whose nearest PCA normals fan
+        (:data:`~curvature.fitting.rounded_edge.EDGE_FLAT`, ``EDGE_FLAT_NOISE``; the outliers
+        left out) and whose nearest PCA normals fan
         out around an axis, over at most ``kc`` neighbors (the fits' largest size: a user's
         ``k`` holds for them too), read at those points where they lie on their circle. None
         where no point does, else (points, k1, k2, normals, dir1, dir2, k1's and k2's
@@ -1116,6 +1122,7 @@ class AutoRun:
         _, nbr, _ = knn_csr(self.points, self.tree, at, k)
         out = np.empty((at.shape[0], 3))
         pca_normals(self.points, at, *_prefix_csr(nbr.reshape(-1, k)[:, 1:], k - 1), out)
+        out[self.outliers[at]] = np.nan  # an outlier's normal says nothing of the surface
         normals[at] = out
         done[at] = True
 

@@ -46,10 +46,10 @@ from numba import njit, prange
 
 from .linalg import jacobi3
 
-__all__ = ["AGREEMENT", "AXIS_MIN", "EDGE_FAN_K", "EDGE_FLAT", "EDGE_KEEP", "EDGE_LADDER",
-           "EDGE_NORMAL_K", "FAN_MIN", "GAP_MAX", "MIN_INLIERS", "NORMAL_TOLERANCE",
-           "RADIUS_NOISE", "SIGNIFICANCE", "SPAN_GATE", "TRIM_NOISE", "edge_circle_fits",
-           "read_edge_circles", "wraps"]
+__all__ = ["AGREEMENT", "AXIS_MIN", "EDGE_FAN_K", "EDGE_FLAT", "EDGE_FLAT_NOISE", "EDGE_KEEP",
+           "EDGE_LADDER", "EDGE_NORMAL_K", "FAN_MIN", "GAP_MAX", "MIN_INLIERS",
+           "NORMAL_TOLERANCE", "RADIUS_NOISE", "SIGNIFICANCE", "SPAN_GATE", "TRIM_NOISE",
+           "edge_circle_fits", "read_edge_circles", "wraps"]
 
 #: Points whose stage-1 neighborhood's flatness (smallest covariance eigenvalue over the
 #: trace, :func:`~curvature.fitting.normal_field.pca_flatness`) is at least this are tried: a
@@ -57,6 +57,14 @@ __all__ = ["AGREEMENT", "AXIS_MIN", "EDGE_FAN_K", "EDGE_FLAT", "EDGE_KEEP", "EDG
 #: of 2.6 and 3.5 spacings at least 0.039 and 0.021 (1st percentile), a plate's rim 0.11. Of
 #: the real scans' points 6 % (bun000) to 34 % (PCL's scenes) are tried (0.01: 15 to 74 %).
 EDGE_FLAT = 0.018
+#: ... and at least this many times what noise alone makes of a flat neighborhood of radius
+#: r, ``2 sigma^2 / r^2`` (a disk's in-plane variances are r^2 / 4). On a torus at 0.1 %
+#: noise the flatness reads that noise: 6,210 of 100,000 points were tried by EDGE_FLAT
+#: alone, and at a million points (sigma about a spacing) the circle fits took 9.9 s of 27.6;
+#: with this, no point. On the bench's plate and blade this bound is 0.003 and 0.006, under
+#: EDGE_FLAT; 4 left some of the 20,000-point blade's leading edge untried (0.313 -> 0.357
+#: on seed 2).
+EDGE_FLAT_NOISE = 2.0
 #: Neighbors whose normals must fan out (:func:`wraps`) for a point to be fitted.
 EDGE_FAN_K = 24
 #: The circle fits read PCA normals over this many nearest neighbors.
