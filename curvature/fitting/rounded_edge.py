@@ -44,7 +44,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .linalg import jacobi3
+from .linalg import cholesky, jacobi3, solve_lower, solve_upper_t
 
 __all__ = ["AGREEMENT", "AXIS_MIN", "EDGE_FAN_K", "EDGE_FLAT", "EDGE_FLAT_NOISE", "EDGE_KEEP",
            "EDGE_LADDER", "EDGE_NORMAL_K", "FAN_MIN", "GAP_MAX", "MIN_INLIERS",
@@ -108,25 +108,18 @@ SPAN_GATE = 160.0
 AGREEMENT = 2.0
 _ROUNDS = 6
 _REFINE = 4
+#: A Cholesky pivot below this share of the largest diagonal entry counts as singular.
+RANK_TOL = 1e-12
 
 
 @njit(cache=True)
-def _solve3(a, b, x):
-    """Solve the 3x3 system ``a x = b`` by Cramer's rule; False where ``a`` is singular."""
-    det = (a[0, 0] * (a[1, 1] * a[2, 2] - a[1, 2] * a[2, 1])
-           - a[0, 1] * (a[1, 0] * a[2, 2] - a[1, 2] * a[2, 0])
-           + a[0, 2] * (a[1, 0] * a[2, 1] - a[1, 1] * a[2, 0]))
-    scale = abs(a[0, 0] * a[1, 1] * a[2, 2]) + 1e-300
-    if not np.isfinite(det) or abs(det) <= 1e-14 * scale:
-        return False
-    for c in range(3):
-        m = a.copy()
-        for r in range(3):
-            m[r, c] = b[r]
-        x[c] = (m[0, 0] * (m[1, 1] * m[2, 2] - m[1, 2] * m[2, 1])
-                - m[0, 1] * (m[1, 0] * m[2, 2] - m[1, 2] * m[2, 0])
-                + m[0, 2] * (m[1, 0] * m[2, 1] - m[1, 1] * m[2, 0])) / det
-    return True
+def _solve_spd(a, b):
+    """``a^-1 b`` for a symmetric positive definite ``a``, and False where ``a`` is
+    numerically singular (the solution is then undefined)."""
+    low, ok = cholesky(a, RANK_TOL)
+    if not ok:
+        return b, False
+    return solve_upper_t(low, solve_lower(low, b)), True
 
 
 @njit(cache=True)
@@ -143,8 +136,8 @@ def _kasa(u, v, w, out):
             b[r] += row[r] * rhs
             for c in range(3):
                 a[r, c] += row[r] * row[c]
-    x = np.empty(3)
-    if not _solve3(a, b, x):
+    x, ok = _solve_spd(a, b)
+    if not ok:
         return False
     cu, cv = -0.5 * x[0], -0.5 * x[1]
     r2 = cu * cu + cv * cv - x[2]
@@ -162,7 +155,6 @@ def _geometric(u, v, w, out):
     """
     jtj = np.zeros((3, 3))
     jtr = np.zeros(3)
-    step = np.empty(3)
     ss, m = 0.0, 0
     for it in range(_REFINE + 1):
         jtj[:, :] = 0.0
@@ -185,22 +177,22 @@ def _geometric(u, v, w, out):
                     jtj[r, c] += row[r] * row[c]
         if it == _REFINE:
             break
-        if not _solve3(jtj, -jtr, step):
+        step, ok = _solve_spd(jtj, -jtr)
+        if not ok:
             return np.nan
         out[0] += step[0]
         out[1] += step[1]
         out[2] += step[2]
         if not out[2] > 0.0:
             return np.nan
-    if m <= 3:
+    low, ok = cholesky(jtj, RANK_TOL)
+    if m <= 3 or not ok:
         return np.nan
-    # (J^T J)^-1 [2, 2] = its cofactor over the determinant
+    # (J^T J)^-1 [2, 2] = |L^-1 e_R|^2
     unit = np.zeros(3)
     unit[2] = 1.0
-    col = np.empty(3)
-    if not _solve3(jtj, unit, col) or not col[2] > 0.0:
-        return np.nan
-    return np.sqrt(ss / (m - 3) * col[2])
+    y = solve_lower(low, unit)
+    return np.sqrt(ss / (m - 3) * np.sum(y * y))
 
 
 @njit(cache=True)
@@ -418,6 +410,7 @@ def edge_circle_fits(points, field, centres, indptr, indices, noise, ladder,
         sks = np.full(s, np.nan)
         widest = 0.0
         best = -1
+        kept = np.zeros(0)  # the inliers of the size kept
         f = np.empty((3, 3))
         c = np.empty(3)
         for t in range(s):
@@ -435,14 +428,15 @@ def edge_circle_fits(points, field, centres, indptr, indices, noise, ladder,
                     agree = False
             if not agree:
                 break
-            best = t
+            best, kept = t, w
             frame[j] = f
             circle[j] = c
             curv[j, 0], std[j, 0] = k, sk
-            curv[j, 1], std[j, 1] = _axial(points, field, p, nbr, w, f, c)
             arc[j, 0], arc[j, 1] = start, span
             count[j] = m
         ok[j] = best >= 0 and widest >= np.radians(SPAN_GATE)
+        if ok[j]:
+            curv[j, 1], std[j, 1] = _axial(points, field, p, nbr, kept, frame[j], circle[j])
 
 
 @njit(parallel=True, cache=True)

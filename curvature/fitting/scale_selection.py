@@ -658,8 +658,8 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out, fit_long=
             long = kinds[li] == KIND_MONGE_RIDGE_LONG
             if long and framed:
                 ridge_frame[:] = frame
-            if framed and 2 * s <= nbr.shape[0] and not (long and not (
-                    fit_long and _long_pool(nbr.shape[0], points.shape[0]))):
+            wanted = not long or fit_long and _long_pool(nbr.shape[0], points.shape[0])
+            if framed and 2 * s <= nbr.shape[0] and wanted:
                 _ridge_rung(points, field, p, nbr, s, kinds[li], frame, quads[li], out[li])
             continue
         elif s >= nbr.shape[0]:

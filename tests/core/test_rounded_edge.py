@@ -10,6 +10,7 @@ from scipy.spatial import cKDTree
 import curvature
 from curvature import synthetic
 from curvature.fitting import rounded_edge as edge
+from curvature.fitting.normal_field import pca_normals
 
 
 def _profile_cloud(arc_from, arc_to, radius, flank, n, noise, seed, height=0.4):
@@ -39,9 +40,12 @@ def _profile_cloud(arc_from, arc_to, radius, flank, n, noise, seed, height=0.4):
 def _pca_normals(points, k=edge.EDGE_NORMAL_K):
     """PCA normals over each point and its k nearest neighbors, as the default gives the
     circle fits."""
+    n = points.shape[0]
     _, nbr = cKDTree(points).query(points, k + 1)
-    local = points[nbr] - points[nbr].mean(axis=1, keepdims=True)
-    return np.linalg.eigh(np.einsum("nki,nkj->nij", local, local))[1][:, :, 0]
+    out = np.empty((n, 3))
+    pca_normals(points, np.arange(n), np.arange(0, (n + 1) * k, k),
+                np.ascontiguousarray(nbr[:, 1:]).ravel(), out)
+    return out
 
 
 def _fit(points, normals, centre_mask, noise):
