@@ -95,6 +95,16 @@ from ..uncertainty import (
     anchored_std,
     with_floor,
 )
+from .beside_edges import (
+    BESIDE_REACH,
+    beside_rows,
+    edge_drop,
+    normals_near,
+    one_sided_normals,
+    reached,
+    widening,
+    without,
+)
 from .sampling import cell_ijk, grid_keys, thinned
 from .wall_sides import one_side_normals
 
@@ -1017,7 +1027,12 @@ class AutoRun:
         in_zone[rows] = zone[owner[rows]]
         # stage1[0] now holds the refined normals the second pass fitted.
         own, own_reach = self._refit(res, stage1[0], field_reach, in_zone, kc)
-        edges = self._rounded_edges(rows, kc)
+        # At every point, not only at rows: the fits beside an edge leave out its points
+        # wherever their lists reach, in a tile's halo too.
+        edges = self._rounded_edges(np.arange(n, dtype=np.int64), kc)
+        # (the last user of the second pass's normals: they are read again beside the edges)
+        old = (reps, owner, chosen, own, res.neighbor_count)  # each row's fit so far
+        beside = self._beside_edges(*stage1, field_reach, edges, rows, kc, old)
         # The reads below need only the fits: the normals and their radii, and the tree (72
         # bytes a point together), go before the result pages the reads fill are touched.
         stage1.clear()
@@ -1041,8 +1056,10 @@ class AutoRun:
             d = np.linalg.norm(self.points[rows] - self.points[reps[owner[rows]]], axis=1)
             self.reach[rows] = d + zone_reach[owner[rows]] + np.sqrt(3.0) * self.plan.cell
             self.reach[own] = np.maximum(self.reach[own], own_reach)
+        if beside is not None:
+            self._store_beside(res, *beside)
         if edges is not None:
-            self._store_rounded_edges(res, edges)
+            self._store_rounded_edges(res, edges, rows)
 
     def _rounded_edges(self, rows, kc):
         """Circle fits across rounded thin edges (:mod:`~curvature.fitting.rounded_edge`) at
@@ -1108,6 +1125,65 @@ class AutoRun:
         return (points[read], k1[read], k2[read], *(d[read] for d in dirs), s1[read],
                 s2[read], count[read], radius[read])
 
+    def _beside_edges(self, field, r_normal, field_reach, edges, rows, kc, old):
+        """Fits without the rounded edges (:mod:`.beside_edges`) at the points of ``rows``
+        beside them, over up to ``kc`` neighbors. ``field`` holds the normals the second pass
+        fitted (``field_reach``: how far each depends); those the edge bent are read again,
+        in place, over the stage-1 neighborhoods (radii ``r_normal``) without it. ``old`` says
+        which fit each row reads so far: (anchors, each point's anchor, the anchors' fit
+        sizes, the rows refitted on their own, their fit sizes (n,)); a row whose fit reached
+        neither the edge nor a normal it bent keeps it. None where
+        there is no edge or no point beside one, else
+        (the fits read at the points, as an :class:`_OutputView` of them, their sizes,
+        standard errors and reach), for :meth:`_store_beside`.
+        """
+        if edges is None:
+            return None
+        t0 = time.perf_counter()
+        edge, across = edges[0], np.fmax(np.abs(edges[1]), np.abs(edges[2]))
+        tree = cKDTree(self.points)
+        drop = edge_drop(tree, self.points, edge, across)
+        query = beside_rows(tree, self.points, rows, edges, drop, self.outliers, self._noise())
+        if query.size == 0:
+            self.timings["beside edges"] = time.perf_counter() - t0
+            return None
+        # Normals again wherever the fits may read one the edge bent: in a tile's halo too.
+        bent = normals_near(tree, self.points, edge, across, drop, self.outliers, r_normal)
+        del tree
+        k = min(self.params["normal_k"] + 1, self.points.shape[0])
+        touched = [np.empty(0, np.int64)]
+        for sl in self._chunks(bent.shape[0]):
+            nbr = knn_csr(self.points, self.tree, bent[sl], k)[1].reshape(-1, k)
+            touched.append(one_sided_normals(self.points, bent[sl], nbr[:, 1:], drop, field))
+        query = query[reached(self.points, query, *old, r_normal, self.params["normal_k"],
+                              np.union1d(np.flatnonzero(drop), np.concatenate(touched)))]
+        if query.size == 0:
+            self.timings["beside edges"] = time.perf_counter() - t0
+            return None
+        self._grow_total(query.shape[0])
+        fits, fit_reach, size, err = self._fit_anchors(query, field, kc, field_reach, drop=drop)
+        out = _OutputView(None, query, 1.0 / self.plan.spacing)  # (stored after the reads)
+        nfr_from_anchors(self.points, query, np.arange(query.shape[0], dtype=np.int64), query,
+                         *fits, *out.arrays)
+        reach = None
+        if self.track_reach:
+            # Which points are left out depends on the circles within reach of the list (the
+            # circles' own reach, the widening) and which points are refitted on those within
+            # BESIDE_REACH of the point.
+            edge_reach = float(edges[-1].max())
+            reach = fit_reach + widening(across).max() + (BESIDE_REACH + 1.0) * edge_reach
+        self.timings["beside edges"] = time.perf_counter() - t0
+        return out, size, err, reach
+
+    def _store_beside(self, res, out, size, err, reach) -> None:
+        """Write the fits of :meth:`_beside_edges` into ``res`` where they succeeded."""
+        take = out.arrays[6] == Status.OK
+        if self.track_reach:
+            self.reach[out.rows] = np.fmax(self.reach[out.rows], reach)
+        out.res = res
+        out.keep(take)
+        out.store(size[take], err[take])
+
     def _edge_normals(self, indices, normals, done) -> None:
         """PCA normals over :data:`~curvature.fitting.rounded_edge.EDGE_NORMAL_K` neighbors
         at the points ``indices`` lists that have none yet (``done``), into ``normals`` (n,
@@ -1126,9 +1202,10 @@ class AutoRun:
         normals[at] = out
         done[at] = True
 
-    def _store_rounded_edges(self, res, edges) -> None:
-        """Write the points' reads of :meth:`_rounded_edges` into ``res``."""
-        r, k1, k2, normals, dir1, dir2, s1, s2, count, reach = edges
+    def _store_rounded_edges(self, res, edges, rows) -> None:
+        """Write the reads of :meth:`_rounded_edges` at the points of ``rows`` into ``res``."""
+        keep = np.isin(edges[0], rows)
+        r, k1, k2, normals, dir1, dir2, s1, s2, count, reach = (x[keep] for x in edges)
         # The anchored fit stays where it agrees with the circle (its curvatures turned to the
         # circle's normal): a leading edge of 2.6 spacings, which the long ridge rung reads.
         flip = np.einsum("ij,ij->i", res.normals[r], normals) < 0.0
@@ -1480,13 +1557,14 @@ class AutoRun:
         return d + fit_reach[owner] + np.sqrt(3.0) * self.plan.cell
 
     def _fit_anchors(self, anchors, field, k, w, positional: bool = True, positions=None,
-                     sigma_share=None):
+                     sigma_share=None, drop=None):
         """Fits at ``anchors`` over up to ``k`` neighbors, the size chosen per anchor
         (:mod:`curvature.fitting.scale_selection`; every anchor uses ``k`` when
         ``scale_gamma`` is 0). ``positional`` includes the Monge rungs of the ladder;
         ``positions`` (n, 3), if given, are where the normal fits read each point's normal
         (neighbors are still found at the points). ``sigma_share`` (a,), if given, scales
         each anchor's calibrated sigma in the standard errors returned (not in the selection).
+        ``drop`` (n,) bool, if given, marks points left out of every list (the anchor stays).
 
         Returns
         -------
@@ -1527,14 +1605,14 @@ class AutoRun:
         outputs = (coef, scale, frame, quad, quad_scale, model, resid, status, chosen, sigma,
                    bias, longer)
         fit = (ladder, kinds, tops, strides, gamma, calib, w, positions, field)
-        self._fit_lists(anchors, None, listed, fit, outputs, reach)
+        self._fit_lists(anchors, None, listed, fit, outputs, reach, drop)
         # The anchors beside a tight ridge fit again from the long ridge rung's pool (bun000,
         # no normals given: 956 of 45,814 fits, 0.05 s of 1.4).
         again = np.flatnonzero(longer)
         if again.size:
             self._grow_total(again.size)
             listed = min(max(k, scale_selection.RIDGE_LONG_POOL), self.points.shape[0] - 1)
-            self._fit_lists(anchors, again, listed, fit, outputs, reach)
+            self._fit_lists(anchors, again, listed, fit, outputs, reach, drop)
         if sigma_share is not None:
             sigma = sigma * sigma_share
         # The kept fit's scale: the quadric's unit where it (or a rung) was kept.
@@ -1542,11 +1620,12 @@ class AutoRun:
         err = anchored_std(sigma, bias, resid, h, self._noise())
         return (coef, scale, frame, quad, quad_scale, model, resid, status), reach, chosen, err
 
-    def _fit_lists(self, anchors, rows, listed, fit, outputs, reach) -> None:
+    def _fit_lists(self, anchors, rows, listed, fit, outputs, reach, drop=None) -> None:
         """:func:`~curvature.fitting.scale_selection.multiscale_anchor_fits` at
         ``anchors[rows]`` (every anchor where ``rows`` is None) from lists of ``listed``
-        neighbors, into ``outputs[...][rows]`` (and ``reach[rows]``), in chunks of about as
-        many neighbor entries as a chunk of 24-neighbor queries."""
+        neighbors (without the points ``drop`` marks, if given), into ``outputs[...][rows]``
+        (and ``reach[rows]``), in chunks of about as many neighbor entries as a chunk of
+        24-neighbor queries."""
         ladder, kinds, tops, strides, gamma, calib, w, positions, field = fit
         step = max(64, self.chunk_size * 24 // max(listed, 24))
         count = anchors.shape[0] if rows is None else rows.shape[0]
@@ -1556,6 +1635,11 @@ class AutoRun:
                 rows[start:start + step]
             query = anchors[at]
             indptr, indices, d2 = knn_csr(self.points, self.tree, query, listed)
+            if reach is not None:
+                nbr = indices.reshape(-1, listed)
+                reach[at] = np.maximum((np.sqrt(d2) + w[nbr]).max(axis=1), w[query])
+            if drop is not None:
+                indptr, indices = without(indptr, indices, drop)
             parts = [out[at] for out in outputs]
             multiscale_anchor_fits(self.points if positions is None else positions, field,
                                    query, indptr, indices,
@@ -1565,9 +1649,6 @@ class AutoRun:
             if rows is not None:
                 for out, part in zip(outputs, parts, strict=True):
                     out[at] = part
-            if reach is not None:
-                nbr = indices.reshape(-1, listed)
-                reach[at] = np.maximum((np.sqrt(d2) + w[nbr]).max(axis=1), w[query])
             self._tick(query.shape[0])
 
     def _refined_field(self, field, anchors, owner, fits, rows=None):
