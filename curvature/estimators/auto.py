@@ -71,14 +71,13 @@ from ..fitting.normal_quadric import N_QUAD
 from ..fitting.outliers import ISOLATION_K, isolated, off_surface
 from ..fitting.rounded_edge import (
     EDGE_FAN_K,
-    EDGE_FLAT,
-    EDGE_FLAT_NOISE,
     EDGE_KEEP,
     EDGE_LADDER,
     EDGE_NORMAL_K,
     FAN_MIN,
     edge_circle_fits,
     read_edge_circles,
+    worth_trying,
     wraps,
 )
 from ..fitting.scale_selection import DEFAULT_GAMMA, RIDGE_POOL, multiscale_anchor_fits
@@ -228,6 +227,15 @@ CLEAN_ON_SURFACE = 1e-7
 # cloud: there a fixed neighbor count covers the patch it covers on a cloud of the right
 # density, and the normals average more points than that cloud has.
 DENSE_TARGET = 0.2
+# Thinned shares of the cloud on which rounded edges are looked for too, each where it keeps
+# at least COARSE_MIN_POINTS points (AutoRun._coarse_edge_reads): the leading edge of a
+# 100,000-point blade spans 8 spacings' radius, twice the circles' reach at full density.
+COARSE_SHARES = (0.25, 0.0625)
+COARSE_MIN_POINTS = 8000
+# ... and only their circles of this many plan spacings' radius and more (those at full
+# density read up to about 1.3: the 20,000-point blade's leading edge; the 100,000-point one's
+# is 2.9).
+COARSE_MIN_RADIUS = 2.0
 # Neighbors looked at beyond normal_k when the outliers are left out of a stage-1 normal.
 RENORMAL_EXTRA = 16
 # Neighbors of the wide noise measurement (AutoPlan.wide_noise).
@@ -887,9 +895,7 @@ class AutoRun:
                  else self._normals_of_one_side(field, flat, r_normal, normal_k))
         # Neighborhoods far from flat, beyond what noise makes of a flat one: where a rounded
         # edge may be (_rounded_edges).
-        with np.errstate(divide="ignore", invalid="ignore"):
-            noisy = EDGE_FLAT_NOISE * 2.0 * self._noise() ** 2 / (r_normal * r_normal)
-        self.edge_candidates = np.flatnonzero((flat >= np.maximum(EDGE_FLAT, noisy))
+        self.edge_candidates = np.flatnonzero(worth_trying(flat, r_normal, self._noise())
                                               & ~self.outliers)
         del flat
         # Offsets of normals refitted without outliers or over one side of a wall, or of
@@ -1029,10 +1035,10 @@ class AutoRun:
         own, own_reach = self._refit(res, stage1[0], field_reach, in_zone, kc)
         # At every point, not only at rows: the fits beside an edge leave out its points
         # wherever their lists reach, in a tile's halo too.
-        edges = self._rounded_edges(np.arange(n, dtype=np.int64), kc)
+        fine, coarse = self._rounded_edges(np.arange(n, dtype=np.int64), kc)
         # (the last user of the second pass's normals: they are read again beside the edges)
         old = (reps, owner, chosen, own, res.neighbor_count)  # each row's fit so far
-        beside = self._beside_edges(*stage1, field_reach, edges, rows, kc, old)
+        beside = self._beside_edges(*stage1, field_reach, fine, coarse, rows, kc, old)
         # The reads below need only the fits: the normals and their radii, and the tree (72
         # bytes a point together), go before the result pages the reads fill are touched.
         stage1.clear()
@@ -1058,8 +1064,9 @@ class AutoRun:
             self.reach[own] = np.maximum(self.reach[own], own_reach)
         if beside is not None:
             self._store_beside(res, *beside)
-        if edges is not None:
-            self._store_rounded_edges(res, edges, rows)
+        for edges in (fine, coarse):
+            if edges is not None:
+                self._store_rounded_edges(res, edges, rows)
 
     def _rounded_edges(self, rows, kc):
         """Circle fits across rounded thin edges (:mod:`~curvature.fitting.rounded_edge`) at
@@ -1067,9 +1074,16 @@ class AutoRun:
         (:data:`~curvature.fitting.rounded_edge.EDGE_FLAT`, ``EDGE_FLAT_NOISE``; the outliers
         left out) and whose nearest PCA normals fan
         out around an axis, over at most ``kc`` neighbors (the fits' largest size: a user's
-        ``k`` holds for them too), read at those points where they lie on their circle. None
-        where no point does, else (points, k1, k2, normals, dir1, dir2, k1's and k2's
-        standard errors, inliers, reach), one row per point.
+        ``k`` holds for them too), read at those points where they lie on their circle; and
+        the circles of coarser levels, read at the other points of the cloud that lie on them
+        (:meth:`_coarse_edge_reads`).
+
+        Returns
+        -------
+        fine, coarse : tuple or None
+            The reads at full density and those of the coarser levels, each None where no
+            point reads a circle, else (points, k1, k2, normals, dir1, dir2, k1's and k2's
+            standard errors, inliers, reach), one row per point.
         """
         t0 = time.perf_counter()
         try:
@@ -1079,6 +1093,99 @@ class AutoRun:
 
     def _edge_reads(self, rows, kc):
         """:meth:`_rounded_edges`."""
+        circles = self._edge_circles(rows, kc)
+        fine = None if circles is None else _read_circles(circles, circles[0], None,
+                                                            self._noise())
+        coarse = [r for r in self._coarse_edge_reads(kc, fine) if r[0].size]
+        if not coarse:
+            return fine, None
+        return fine, tuple(np.concatenate(parts) for parts in zip(*coarse, strict=True))
+
+    def _coarse_edge_reads(self, kc, finer) -> list:
+        """Circles fitted on thinned shares of the cloud (:data:`COARSE_SHARES`), read at the
+        points no finer level's circle reads (``finer``: the full cloud's reads, or None);
+        one read tuple per level that has any.
+
+        The circle fits' scale is set in neighbors (their ladder, the fan and flatness tests),
+        so on a denser cloud an edge spans more spacings than a list reaches round: the
+        100,000-point blade's leading edge (8 spacings' radius) read no circle, and its
+        anchored fits read it 1.72 (the 20,000-point blade's circles 0.46). On a hash-thinned
+        share (the same points in any order and tile) the edge spans fewer spacings again.
+        Only circles of :data:`COARSE_MIN_RADIUS` plan spacings and more are read: those the
+        full density's circles cannot reach round. At a quarter of the 100,000-point blade's
+        points the wedge beside its trailing edge (its sides 2 to 4 thinned spacings apart)
+        fits circles through both sides, of 0.9 to 1.6 plan spacings' radius: read, they
+        raised the sides' error from 0.438 to 0.524.
+        """
+        n = self.points.shape[0]
+        taken = np.zeros(n, bool)
+        if finer is not None:
+            taken[finer[0]] = True
+        shares = [share for share in COARSE_SHARES if share * n >= COARSE_MIN_POINTS]
+        # The flatness test runs at every point of the coarsest share only (a sixteenth),
+        # and at a finer share only near that share's candidates: an edge that is not flat
+        # at a finer share is not at a coarser one (its neighborhoods are wider), and on a
+        # noisy cloud every point of a share would be tested otherwise (a 1M-point torus:
+        # 0.56 s for one candidate).
+        coarser = None  # the coarser share's candidates, and how far from them to look
+        levels = []
+        for share in shares[::-1]:
+            idx = thinned_points(self.points, share)
+            idx = idx[~self.outliers[idx]]
+            sub = AutoRun(np.ascontiguousarray(self.points[idx]), self.params, self.chunk_size,
+                          None, plan=self.plan)
+            seeds = np.arange(idx.shape[0], dtype=np.int64)
+            seeded = 0.0  # how far beyond its own reach a circle's candidacy depends
+            if coarser is not None:
+                seeds = seeds[_within_any(*coarser, sub.points)]
+                seeded = 1.5 * coarser[1]  # the coarser candidates' own neighborhoods too
+            sub.edge_candidates = sub._flat_points(self._noise(), seeds)
+            levels.append((idx, sub, seeded))
+            # (twice the radius of a stage-1 neighborhood at this share)
+            coarser = (sub.points[sub.edge_candidates], 2.0 * self.plan.spacing
+                       * np.sqrt(self.params["normal_k"] / PLAN_K / share))
+        out = []
+        for idx, sub, seeded in levels[::-1]:  # finest share first
+            circles = sub._edge_circles(np.arange(idx.shape[0], dtype=np.int64),
+                                        min(kc, idx.shape[0] - 1))
+            if circles is None:
+                continue
+            centres = sub.points[circles[0]]
+            d, j = cKDTree(centres).query(self.points, workers=numba.get_num_threads())
+            near = np.flatnonzero((d <= circles[-1][j]) & ~taken & ~self.outliers)
+            j = j[near]
+            reads = _read_circles(tuple(x[j] for x in circles), near,
+                                  self.points[near] - centres[j], self._noise())
+            if reads is not None:
+                # (the full density's circles read radii up to about 1.3 plan spacings)
+                wide = np.fmax(np.abs(reads[1]), np.abs(reads[2])) * COARSE_MIN_RADIUS <= (
+                    1.0 / self.plan.spacing)
+                reads = tuple(x[wide] for x in reads[:-1]) + (reads[-1][wide] + seeded,)
+                taken[reads[0]] = True
+                out.append(reads)
+        return out
+
+    def _flat_points(self, noise, among) -> np.ndarray:
+        """The points of ``among`` (int64) whose stage-1 neighborhood (``normal_k``
+        nearest) is far from flat, as :meth:`_stage1`'s rounded-edge candidates, for a cloud
+        of noise ``noise``."""
+        n = self.points.shape[0]
+        k = min(self.params["normal_k"], n - 1)
+        found = [np.empty(0, np.int64)]
+        for sl in self._chunks(among.shape[0]):
+            query = among[sl]
+            _, indices, d2 = knn_csr(self.points, self.tree, query, k + 1)
+            normals, flat = np.empty((query.shape[0], 3)), np.empty(query.shape[0])
+            pca_flatness(self.points, query, *_prefix_csr(indices.reshape(-1, k + 1)[:, 1:], k),
+                         normals, flat)
+            radius = np.sqrt(d2.reshape(-1, k + 1)[:, -1])
+            found.append(query[worth_trying(flat, radius, noise)])
+        return np.concatenate(found)
+
+    def _edge_circles(self, rows, kc):
+        """The usable circles around the candidate points of ``rows`` (None if none): the
+        points, and their frames, circles, curvatures, standard errors, arcs, inlier counts
+        and list radii (:func:`~curvature.fitting.rounded_edge.edge_circle_fits`)."""
         n = self.points.shape[0]
         ladder = np.asarray([k for k in EDGE_LADDER if k <= min(n - 1, kc)], np.int64)
         points = self.edge_candidates[np.isin(self.edge_candidates, rows)]
@@ -1113,23 +1220,16 @@ class AutoRun:
         del normals, done
         if not ok.any():
             return None
-        points, radius, count = points[ok], radius[ok], count[ok]
-        m = points.shape[0]
-        k1, k2, s1, s2 = np.empty(m), np.empty(m), np.empty(m), np.empty(m)
-        dirs = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3))
-        read = np.zeros(m, bool)
-        read_edge_circles(noise, frame[ok], circle[ok], curv[ok], std[ok], arc[ok], k1, k2,
-                          *dirs, s1, s2, read)
-        if not read.any():
-            return None
-        return (points[read], k1[read], k2[read], *(d[read] for d in dirs), s1[read],
-                s2[read], count[read], radius[read])
+        return tuple(x[ok] for x in (points, frame, circle, curv, std, arc, count, radius))
 
-    def _beside_edges(self, field, r_normal, field_reach, edges, rows, kc, old):
+    def _beside_edges(self, field, r_normal, field_reach, edges, coarse, rows, kc, old):
         """Fits without the rounded edges (:mod:`.beside_edges`) at the points of ``rows``
-        beside them, over up to ``kc`` neighbors. ``field`` holds the normals the second pass
-        fitted (``field_reach``: how far each depends); those the edge bent are read again,
-        in place, over the stage-1 neighborhoods (radii ``r_normal``) without it. ``old`` says
+        beside them, over up to ``kc`` neighbors: beside the edges read at full density,
+        ``edges``, without those and the coarser levels' reads, ``coarse`` (either None where
+        there are none; as :meth:`_rounded_edges` returns them). ``field`` holds the normals
+        the second pass fitted (``field_reach``: how far each depends); those the edge bent
+        are read again, in place, over the stage-1 neighborhoods (radii ``r_normal``) without
+        it. ``old`` says
         which fit each row reads so far: (anchors, each point's anchor, the anchors' fit
         sizes, the rows refitted on their own, their fit sizes (n,)); a row whose fit reached
         neither the edge nor a normal it bent keeps it. None where
@@ -1140,7 +1240,11 @@ class AutoRun:
         if edges is None:
             return None
         t0 = time.perf_counter()
-        edge, across = edges[0], np.fmax(np.abs(edges[1]), np.abs(edges[2]))
+        # Every edge is left out (a coarser level's too, ``coarse``); the points beside the
+        # full density's are fitted again.
+        every = edges if coarse is None else tuple(
+            np.concatenate(parts) for parts in zip(edges, coarse, strict=True))
+        edge, across = every[0], np.fmax(np.abs(every[1]), np.abs(every[2]))
         tree = cKDTree(self.points)
         drop = edge_drop(tree, self.points, edge, across)
         query = beside_rows(tree, self.points, rows, edges, drop, self.outliers, self._noise())
@@ -1170,7 +1274,7 @@ class AutoRun:
             # Which points are left out depends on the circles within reach of the list (the
             # circles' own reach, the widening) and which points are refitted on those within
             # BESIDE_REACH of the point.
-            edge_reach = float(edges[-1].max())
+            edge_reach = float(every[-1].max())
             reach = fit_reach + widening(across).max() + (BESIDE_REACH + 1.0) * edge_reach
         self.timings["beside edges"] = time.perf_counter() - t0
         return out, size, err, reach
@@ -1667,6 +1771,37 @@ class AutoRun:
             ok = outs[6] == Status.OK
             field[query[ok]] = outs[2][ok]
         return field
+
+
+def _within_any(found: np.ndarray, reach: float, points: np.ndarray) -> np.ndarray:
+    """Whether each of ``points`` (m, 3) lies within ``reach`` of one of ``found`` (f, 3),
+    shape (m,), bool."""
+    if found.shape[0] == 0:
+        return np.zeros(points.shape[0], bool)
+    d, _ = cKDTree(found).query(points, workers=numba.get_num_threads(),
+                                distance_upper_bound=reach)
+    return d <= reach
+
+
+def _read_circles(circles: tuple, readers: np.ndarray, offsets, noise: float):
+    """The reads of ``circles`` (as :meth:`AutoRun._edge_circles` returns them, one row per
+    reader) at the points ``readers`` (m,), ``offsets`` (m, 3) from the points the circles
+    were fitted around (None: the readers are those points), where they lie on their circle
+    (:func:`~curvature.fitting.rounded_edge.read_edge_circles`). None where none does, else
+    (points, k1, k2, normals, dir1, dir2, k1's and k2's standard errors, inliers, reach)."""
+    _, frame, circle, curv, std, arc, count, radius = circles
+    m = readers.shape[0]
+    if offsets is None:
+        offsets = np.zeros((m, 3))
+    k1, k2, s1, s2 = np.empty(m), np.empty(m), np.empty(m), np.empty(m)
+    dirs = np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3))
+    read = np.zeros(m, bool)
+    read_edge_circles(noise, offsets, frame, circle, curv, std, arc, k1, k2, *dirs, s1, s2, read)
+    if not read.any():
+        return None
+    reach = radius + np.linalg.norm(offsets, axis=1)
+    return (readers[read], k1[read], k2[read], *(d[read] for d in dirs), s1[read], s2[read],
+            count[read], reach[read])
 
 
 def _prefix_csr(nbr: np.ndarray, k: int):

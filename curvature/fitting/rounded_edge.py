@@ -49,7 +49,7 @@ from .linalg import cholesky, jacobi3, solve_lower, solve_upper_t
 __all__ = ["AGREEMENT", "AXIS_MIN", "EDGE_FAN_K", "EDGE_FLAT", "EDGE_FLAT_NOISE", "EDGE_KEEP",
            "EDGE_LADDER", "EDGE_NORMAL_K", "FAN_MIN", "GAP_MAX", "MIN_INLIERS",
            "NORMAL_TOLERANCE", "RADIUS_NOISE", "SIGNIFICANCE", "SPAN_GATE", "TRIM_NOISE",
-           "edge_circle_fits", "read_edge_circles", "wraps"]
+           "edge_circle_fits", "read_edge_circles", "worth_trying", "wraps"]
 
 #: Points whose stage-1 neighborhood's flatness (smallest covariance eigenvalue over the
 #: trace, :func:`~curvature.fitting.normal_field.pca_flatness`) is at least this are tried: a
@@ -110,6 +110,16 @@ _ROUNDS = 6
 _REFINE = 4
 #: A Cholesky pivot below this share of the largest diagonal entry counts as singular.
 RANK_TOL = 1e-12
+
+
+def worth_trying(flat: np.ndarray, radius: np.ndarray, noise: float) -> np.ndarray:
+    """Whether points whose stage-1 neighborhoods have flatness ``flat`` (m,) within
+    ``radius`` (m,) may lie on a rounded edge: at least :data:`EDGE_FLAT` and
+    :data:`EDGE_FLAT_NOISE` times what noise ``noise`` (length unit) alone makes of a flat
+    neighborhood of that radius, shape (m,), bool."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        noisy = EDGE_FLAT_NOISE * 2.0 * noise ** 2 / (radius * radius)
+    return flat >= np.maximum(EDGE_FLAT, noisy)
 
 
 @njit(cache=True)
@@ -440,15 +450,18 @@ def edge_circle_fits(points, field, centres, indptr, indices, noise, ladder,
 
 
 @njit(parallel=True, cache=True)
-def read_edge_circles(noise, frame, circle, curv, std, arc, k1, k2, normals, dir1, dir2, k1_std,
-                      k2_std, read):
-    """Each fitted point's curvatures, normal and directions from its own circle, where it
-    lies on it and inside its arc without the bands at the arc's ends, where the faces begin
+def read_edge_circles(noise, offsets, frame, circle, curv, std, arc, k1, k2, normals, dir1, dir2,
+                      k1_std, k2_std, read):
+    """Curvatures, normals and directions of points from circles, where a point lies on its
+    circle and inside its arc without the bands at the arc's ends, where the faces begin
     (module docstring); ``read[i]`` says whether it did (the outputs are left alone elsewhere).
 
     Parameters
     ----------
     noise : float
+    offsets : ndarray, shape (m, 3)
+        Each reading point's position less that of the point its circle was fitted around
+        (zeros where a point reads its own circle).
     frame, circle, curv, std, arc : ndarray
         As :func:`edge_circle_fits` returned them, shape (m, ...).
     k1, k2, k1_std, k2_std : ndarray, shape (m,)
@@ -462,7 +475,10 @@ def read_edge_circles(noise, frame, circle, curv, std, arc, k1, k2, normals, dir
     for i in prange(frame.shape[0]):
         read[i] = False
         e1, e2, ax = frame[i, 0], frame[i, 1], frame[i, 2]
-        u, v = -circle[i, 0], -circle[i, 1]  # the point itself, from the centre
+        d = offsets[i]
+        # the point, from the centre
+        u = d[0] * e1[0] + d[1] * e1[1] + d[2] * e1[2] - circle[i, 0]
+        v = d[0] * e2[0] + d[1] * e2[1] + d[2] * e2[2] - circle[i, 1]
         rho = np.sqrt(u * u + v * v)
         if not (rho > 0.0 and abs(rho - circle[i, 2]) <= band):
             continue

@@ -108,7 +108,7 @@ def test_a_leading_edge_of_2_6_spacings_reads_well():
 
 def test_without_circles_a_leading_edge_reads_its_long_ridge_rung(monkeypatch):
     # the long ridge rung alone (stop 43): 0.434, every edge point keeping it
-    monkeypatch.setattr(auto.AutoRun, "_rounded_edges", lambda self, *args: None)
+    monkeypatch.setattr(auto.AutoRun, "_rounded_edges", lambda self, *args: (None, None))
     blade = synthetic.blade(n=10000, noise=0.1, seed=1)
     res = curvature.estimate(blade.points, normals=blade.normals)
     edge = blade.region_mask("leading_edge") & blade.interior

@@ -66,7 +66,8 @@ def _read(noise, fits):
     m = int(ok.sum())
     outs = (np.empty(m), np.empty(m), np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3)),
             np.empty(m), np.empty(m), np.zeros(m, bool))
-    edge.read_edge_circles(noise, frame[ok], circle[ok], curv[ok], std[ok], arc[ok], *outs)
+    edge.read_edge_circles(noise, np.zeros((m, 3)), frame[ok], circle[ok], curv[ok], std[ok],
+                           arc[ok], *outs)
     return outs
 
 
@@ -99,6 +100,30 @@ def test_a_half_round_rim_reads_its_radius_and_a_straight_axis():
     exact = normals[_near_apex(points, radius, 0.0)][ok][read]
     assert np.all(np.einsum("ij,ij->i", nrm[read], exact) > np.cos(np.radians(5)))
     assert np.all(np.abs(dir2[read][:, 2]) > 0.99)
+
+
+def test_other_points_read_a_circle_where_they_lie_on_its_arc():
+    # read_edge_circles at offsets from the fitted point (the coarse levels' reads): a point
+    # 30 degrees round the arc reads the circle with its own radius as normal; the same point
+    # moved 10 noise off the circle, or past the arc's end, does not
+    radius, noise = 0.03, 0.001
+    points, normals = _profile_cloud(-np.pi / 2, np.pi / 2, radius, 0.1, 1500, noise, 1)
+    centre = _near_apex(points, radius, 0.0)
+    fits = _fit(points, normals, centre, noise)
+    frame, circle, curv, std, arc, _, ok = fits
+    first = np.flatnonzero(ok)[0]
+    fitted = points[np.flatnonzero(centre)[first]]
+    t = np.radians([30.0, 30.0, 100.0])
+    lift = np.array([0.0, 10 * noise, 0.0])
+    at = np.c_[(radius + lift) * np.cos(t), (radius + lift) * np.sin(t), np.full(3, fitted[2])]
+    m = at.shape[0]
+    outs = (np.empty(m), np.empty(m), np.empty((m, 3)), np.empty((m, 3)), np.empty((m, 3)),
+            np.empty(m), np.empty(m), np.zeros(m, bool))
+    rows = [np.repeat(x[first:first + 1], m, axis=0) for x in (frame, circle, curv, std, arc)]
+    edge.read_edge_circles(noise, at - fitted, *rows, *outs)
+    np.testing.assert_array_equal(outs[7], [True, False, False])
+    assert outs[0][0] == pytest.approx(curv[first, 0])
+    assert np.dot(outs[2][0], [np.cos(t[0]), np.sin(t[0]), 0.0]) > np.cos(np.radians(3))
 
 
 def test_the_circle_is_the_same_in_any_position():
@@ -199,3 +224,35 @@ def test_noise_alone_does_not_make_a_point_worth_a_circle(monkeypatch):
     torus = synthetic.torus(100_000, noise=0.1, seed=1)
     curvature.estimate(torus.points, normals=torus.normals)
     assert tried == [0]
+
+
+def test_a_denser_blade_reads_its_leading_edge_on_a_thinned_share(monkeypatch):
+    # 100,000 points (leading edge of 8 spacings' radius, 2.9 plan spacings): the circles at
+    # full density do not reach round it and the anchored fits read it 1.72; the circles of
+    # the quarter share 0.379 (the 20,000-point blade's own circles 0.46). The wedge beside
+    # the trailing edge fits circles through both sides at that share, of at most 1.6 plan
+    # spacings: read (COARSE_MIN_RADIUS = 0), they raised the sides from 0.438 to 0.524.
+    from curvature.estimators import auto
+
+    blade = synthetic.blade(n=100_000, noise=0.1, seed=1)
+    lead = blade.region_mask("leading_edge") & blade.interior
+    side = blade.region_mask("side") & blade.interior
+
+    def errors(**options):
+        res = curvature.estimate(blade.points, normals=blade.normals, **options)
+        return np.fmax(np.abs(res.k1 - blade.k1), np.abs(res.k2 - blade.k2)), res
+
+    worst, res = errors()
+    with monkeypatch.context() as m:
+        m.setattr(auto, "COARSE_SHARES", ())
+        full_only, _ = errors()
+    with monkeypatch.context() as m:
+        m.setattr(auto, "COARSE_MIN_RADIUS", 0.0)
+        unguarded, _ = errors()
+    assert worst[lead].mean() < 0.5 and full_only[lead].mean() > 1.4
+    np.testing.assert_allclose(worst[side].mean(), full_only[side].mean(), rtol=0.01)
+    assert unguarded[side].mean() > 1.1 * full_only[side].mean()
+    # the shares are thinned by a hash of the coordinates: each tile thins its points alike
+    _, tiled = errors(tile_points=40_000)
+    assert tiled.info["tiles"] > 1
+    np.testing.assert_array_equal(tiled.k1, res.k1)
