@@ -1037,8 +1037,8 @@ class AutoRun:
         # wherever their lists reach, in a tile's halo too.
         fine, coarse = self._rounded_edges(np.arange(n, dtype=np.int64), kc)
         # (the last user of the second pass's normals: they are read again beside the edges)
-        old = (reps, owner, chosen, own, res.neighbor_count)  # each row's fit so far
-        beside = self._beside_edges(*stage1, field_reach, fine, coarse, rows, kc, old)
+        old = (reps, owner, chosen, own)  # each row's fit so far (own's sizes are in res)
+        beside = self._beside_edges(res, *stage1, field_reach, fine, coarse, rows, kc, old)
         # The reads below need only the fits: the normals and their radii, and the tree (72
         # bytes a point together), go before the result pages the reads fill are touched.
         stage1.clear()
@@ -1063,7 +1063,7 @@ class AutoRun:
             self.reach[rows] = d + zone_reach[owner[rows]] + np.sqrt(3.0) * self.plan.cell
             self.reach[own] = np.maximum(self.reach[own], own_reach)
         if beside is not None:
-            self._store_beside(res, *beside)
+            self._store_beside(*beside)
         for edges in (fine, coarse):
             if edges is not None:
                 self._store_rounded_edges(res, edges, rows)
@@ -1222,24 +1222,31 @@ class AutoRun:
             return None
         return tuple(x[ok] for x in (points, frame, circle, curv, std, arc, count, radius))
 
-    def _beside_edges(self, field, r_normal, field_reach, edges, coarse, rows, kc, old):
+    def _beside_edges(self, res, field, r_normal, field_reach, edges, coarse, rows, kc, old):
         """Fits without the rounded edges (:mod:`.beside_edges`) at the points of ``rows``
         beside them, over up to ``kc`` neighbors: beside the edges read at full density,
         ``edges``, without those and the coarser levels' reads, ``coarse`` (either None where
         there are none; as :meth:`_rounded_edges` returns them). ``field`` holds the normals
         the second pass fitted (``field_reach``: how far each depends); those the edge bent
         are read again, in place, over the stage-1 neighborhoods (radii ``r_normal``) without
-        it. ``old`` says
-        which fit each row reads so far: (anchors, each point's anchor, the anchors' fit
-        sizes, the rows refitted on their own, their fit sizes (n,)); a row whose fit reached
-        neither the edge nor a normal it bent keeps it. None where
-        there is no edge or no point beside one, else
-        (the fits read at the points, as an :class:`_OutputView` of them, their sizes,
-        standard errors and reach), for :meth:`_store_beside`.
+        it. ``old`` says which fit each row of ``res`` reads so far: (anchors, each point's
+        anchor, the anchors' fit sizes, the rows refitted on their own, whose sizes ``res``
+        holds); a row whose fit reached neither the edge nor a normal it bent keeps it. None
+        where there is no edge or no point beside one, else (the fits read at the points, as
+        an :class:`_OutputView` of ``res``, their sizes, standard errors and reach), for
+        :meth:`_store_beside`.
         """
         if edges is None:
             return None
         t0 = time.perf_counter()
+        try:
+            return self._beside_fits(res, field, r_normal, field_reach, edges, coarse, rows,
+                                     kc, old)
+        finally:
+            self.timings["beside edges"] = time.perf_counter() - t0
+
+    def _beside_fits(self, res, field, r_normal, field_reach, edges, coarse, rows, kc, old):
+        """:meth:`_beside_edges`."""
         # Every edge is left out (a coarser level's too, ``coarse``); the points beside the
         # full density's are fitted again.
         every = edges if coarse is None else tuple(
@@ -1249,7 +1256,6 @@ class AutoRun:
         drop = edge_drop(tree, self.points, edge, across)
         query = beside_rows(tree, self.points, rows, edges, drop, self.outliers, self._noise())
         if query.size == 0:
-            self.timings["beside edges"] = time.perf_counter() - t0
             return None
         # Normals again wherever the fits may read one the edge bent: in a tile's halo too.
         bent = normals_near(tree, self.points, edge, across, drop, self.outliers, r_normal)
@@ -1259,14 +1265,14 @@ class AutoRun:
         for sl in self._chunks(bent.shape[0]):
             nbr = knn_csr(self.points, self.tree, bent[sl], k)[1].reshape(-1, k)
             touched.append(one_sided_normals(self.points, bent[sl], nbr[:, 1:], drop, field))
-        query = query[reached(self.points, query, *old, r_normal, self.params["normal_k"],
+        query = query[reached(self.points, query, *old, res.neighbor_count, r_normal,
+                              self.params["normal_k"],
                               np.union1d(np.flatnonzero(drop), np.concatenate(touched)))]
         if query.size == 0:
-            self.timings["beside edges"] = time.perf_counter() - t0
             return None
         self._grow_total(query.shape[0])
         fits, fit_reach, size, err = self._fit_anchors(query, field, kc, field_reach, drop=drop)
-        out = _OutputView(None, query, 1.0 / self.plan.spacing)  # (stored after the reads)
+        out = _OutputView(res, query, 1.0 / self.plan.spacing)  # (stored after the reads)
         nfr_from_anchors(self.points, query, np.arange(query.shape[0], dtype=np.int64), query,
                          *fits, *out.arrays)
         reach = None
@@ -1276,15 +1282,13 @@ class AutoRun:
             # BESIDE_REACH of the point.
             edge_reach = float(every[-1].max())
             reach = fit_reach + widening(across).max() + (BESIDE_REACH + 1.0) * edge_reach
-        self.timings["beside edges"] = time.perf_counter() - t0
         return out, size, err, reach
 
-    def _store_beside(self, res, out, size, err, reach) -> None:
-        """Write the fits of :meth:`_beside_edges` into ``res`` where they succeeded."""
+    def _store_beside(self, out, size, err, reach) -> None:
+        """Write the fits of :meth:`_beside_edges` into their result where they succeeded."""
         take = out.arrays[6] == Status.OK
         if self.track_reach:
             self.reach[out.rows] = np.fmax(self.reach[out.rows], reach)
-        out.res = res
         out.keep(take)
         out.store(size[take], err[take])
 
