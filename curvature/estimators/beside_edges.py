@@ -10,10 +10,14 @@ edge's curvature jump read 1.7 on a flat side and carried a sixth of the sides' 
 
 The edge is known once its circle is (:mod:`~curvature.fitting.rounded_edge`): the points that
 read a circle, widened along the surface by :data:`DROP_GROW` times the arc of the circle's
-end band (where the faces continue the arc). The points beside it, within
-:data:`BESIDE_REACH` times the edge's fit radius and off its circle, are fitted again from
-neighbor lists without those points, over normals read again by PCA without them wherever the
-edge was among a point's stage-1 neighbors (:func:`one_sided_normals`), and take the new fit.
+end band (where the faces continue the arc). The points beside it that read no circle,
+those within :data:`BESIDE_REACH` times the fit radius of a point that read its own circle
+and those the widening covers (the faces past an arc's end), are fitted again from neighbor
+lists without the edge, over normals read again by PCA without it wherever it was among a
+point's stage-1 neighbors (:func:`one_sided_normals`), and take the new fit. The points of
+an arc that read no circle of their own read a neighbor's where they lie on it
+(``AutoRun._rounded_edges``), so a point the widening covers and no circle reads lies past
+the arc's end, or within noise of it.
 
 Everything here is local: the widening and the reach are per edge point, and the normals are
 read again in a tile's halo too, so tiled runs give the results of untiled ones.
@@ -26,7 +30,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from ..fitting.normal_field import pca_flatness
-from ..fitting.rounded_edge import NORMAL_TOLERANCE, TRIM_NOISE
+from ..fitting.rounded_edge import NORMAL_TOLERANCE
 from .wall_sides import SIDE_FLAT
 
 __all__ = ["BESIDE_REACH", "DROP_GROW", "beside_rows", "edge_drop", "normals_near",
@@ -34,10 +38,12 @@ __all__ = ["BESIDE_REACH", "DROP_GROW", "beside_rows", "edge_drop", "normals_nea
 
 #: The edge left out of the fits: the points that read a circle and every point within this
 #: many times the arc of the circle's end band (``NORMAL_TOLERANCE`` degrees times its
-#: radius) of one. With 1 or 1.5, points of a rim of 2.6 spacings that lie between
-#: stretches that read their circle were fitted as a face (one read 0 instead of 33; a bent
-#: wall's rims +7 % and +3 %); with 2 none is. Bench blade's sides / plate's faces, seeds 1-4
-#: (0.218 / 0.235 without): 0.160 / 0.199 (1), 0.161 / 0.198 (1.5), 0.165 / 0.189 (2).
+#: radius) of one that read its own circle or a thinned share's. Since the points the
+#: widening covers are fitted again too, measured with 1 / 1.5 / 2: bench plate's faces,
+#: seeds 1-4, 0.199 / 0.198 / 0.188; the 100,000-point blade's sides 0.438 / 0.413 / 0.412
+#: (the 20,000-point blade's 0.141 / 0.145 / 0.146, the bench blade's within 1 %). Until
+#: then 1 and 1.5 read points at a rim's junction with a face as the face (one read 0
+#: instead of 33), which they now do with 2 as well (see the bent wall's test).
 DROP_GROW = 2.0
 #: Points within this many times an edge point's fit radius (the circle's largest list, 192
 #: neighbors) of it are refitted; the default's widest fits reach about twice as far. Bench
@@ -109,15 +115,12 @@ def normals_near(tree: cKDTree, points: np.ndarray, edge: np.ndarray, across: np
     return np.flatnonzero(near & ~drop & ~outliers).astype(np.int64)
 
 
-def beside_rows(tree: cKDTree, points: np.ndarray, rows: np.ndarray, edges: tuple,
-                drop: np.ndarray, outliers: np.ndarray, noise: float) -> np.ndarray:
-    """The points of ``rows`` to fit again beside the edge.
-
-    Those within :data:`BESIDE_REACH` times an edge point's fit radius of it, not left out
-    (``drop``), not outliers, and off the circle of their nearest edge point: farther than
-    ``TRIM_NOISE`` noise from it, or at an angle around its centre beyond ``NORMAL_TOLERANCE``
-    from that point's own (a rim's point between stretches that read their circle lies on
-    it, a face point past the end band does not).
+def beside_rows(tree: cKDTree, points: np.ndarray, rows: np.ndarray, own, drop: np.ndarray,
+                skip: np.ndarray) -> np.ndarray:
+    """The points of ``rows`` to fit again beside the edge: those left out with it (``drop``:
+    the faces past an arc's end) and those within :data:`BESIDE_REACH` times the fit radius
+    of a point that read its own circle (``own``), but not those ``skip`` marks (outliers,
+    the points that read a circle).
 
     Parameters
     ----------
@@ -126,40 +129,21 @@ def beside_rows(tree: cKDTree, points: np.ndarray, rows: np.ndarray, edges: tupl
     points : ndarray, shape (n, 3)
     rows : ndarray, shape (m,), int64
         The points whose results are wanted.
-    edges : tuple
-        As ``AutoRun._rounded_edges`` returns it: the edge points, their k1, k2, normals
-        (away from the circle's centre), dir1, dir2, ..., and last their fit radius.
-    drop : ndarray, shape (n,), bool
-    outliers : ndarray, shape (n,), bool
-    noise : float
-        The cloud's noise (length unit).
+    own : tuple or None
+        The reads of the points' own circles as ``AutoRun._rounded_edges`` returns them: the
+        points first, their fit radius last (None: there are none).
+    drop, skip : ndarray, shape (n,), bool
 
     Returns
     -------
     ndarray, shape (b,), int64, increasing
     """
-    edge, k1, k2, normals, dir1, dir2 = edges[:6]
-    near = np.zeros(points.shape[0], bool)
-    near[_within(tree, points[edge], BESIDE_REACH * edges[-1])] = True
+    near = drop.copy()
+    if own is not None:
+        near[_within(tree, points[own[0]], BESIDE_REACH * own[-1])] = True
     wanted = np.zeros(points.shape[0], bool)
     wanted[rows] = True
-    near &= wanted & ~drop & ~outliers
-    query = np.flatnonzero(near).astype(np.int64)
-    if query.size == 0:
-        return query
-    _, j = cKDTree(points[edge]).query(points[query])
-    # The circle of the nearest edge point: across it the larger curvature, along its axis
-    # the other.
-    big = np.abs(k1[j]) >= np.abs(k2[j])
-    across = np.where(big, k1[j], k2[j])
-    axis = np.where(big[:, None], dir2[j], dir1[j])
-    centre = points[edge[j]] - normals[j] / across[:, None]
-    v = points[query] - centre
-    v -= np.einsum("ij,ij->i", v, axis)[:, None] * axis
-    rho = np.linalg.norm(v, axis=1)
-    on = ((np.abs(rho - 1.0 / np.abs(across)) <= TRIM_NOISE * noise)
-          & (np.einsum("ij,ij->i", v, normals[j]) >= np.cos(np.radians(NORMAL_TOLERANCE)) * rho))
-    return query[~on]
+    return np.flatnonzero(near & wanted & ~skip).astype(np.int64)
 
 
 def without(indptr: np.ndarray, indices: np.ndarray, drop: np.ndarray):

@@ -165,7 +165,8 @@ def test_no_rounded_edge_where_the_surface_does_not_turn_half_round(what):
 def test_the_bench_plate_reads_its_rims():
     # rims of 1.5 spacings' radius (k = 33, 10,000 points, 0.1 % noise): the anchored fits
     # read them 18.2 on average (APSS at scale 8: 6.1); with the circles 1.32 (seeds 1 to 4:
-    # 1.32 / 1.67 / 1.69 / 1.09)
+    # 1.32 / 1.67 / 1.18 / 1.09; seed 3 1.69 until its unread rim points read their nearest
+    # circle)
     plate = synthetic.thin_plate(n=10000, noise=0.1, seed=1)
     res = curvature.estimate(plate.points, normals=plate.normals)
     rim = plate.region_mask("rim") & plate.interior
@@ -194,17 +195,27 @@ def test_rounded_edges_do_not_depend_on_order_workers_or_tiles(change):
     np.testing.assert_array_equal(other.k2_std, res.k2_std)
 
 
-def test_a_leading_edge_of_3_5_spacings_reads_its_circle():
+def test_a_leading_edge_of_3_5_spacings_reads_its_circle(monkeypatch):
     # the 20,000-point blade (leading edge k = 20 of 3.5 spacings' radius, 0.1 % noise): the
     # anchored fits read it 1.18 / 1.06 / 1.18 (seeds 1 / 2 / 3), APSS 1.41 on seed 1; the
-    # circles 0.46 / 0.31 / 0.51
+    # points' own circles 0.46 / 0.31 / 0.51, where 69 of seed 1's 384 edge points read none
+    # (1.55 there); with those read off their nearest circle 0.22 / 0.27 / 0.36
+    from curvature.estimators import auto
+
     blade = synthetic.blade(noise=0.1, seed=1)
-    res = curvature.estimate(blade.points, normals=blade.normals)
     lead = blade.region_mask("leading_edge") & blade.interior
-    worst = np.fmax(np.abs(res.k1 - blade.k1), np.abs(res.k2 - blade.k2))
-    assert worst[lead].mean() < 0.7
     side = blade.region_mask("side") & blade.interior
-    assert worst[side].mean() < 0.21  # 0.178 with or without the circles
+
+    def errors():
+        res = curvature.estimate(blade.points, normals=blade.normals)
+        return np.fmax(np.abs(res.k1 - blade.k1), np.abs(res.k2 - blade.k2))
+
+    worst = errors()
+    with monkeypatch.context() as m:
+        m.setattr(auto, "FILL_REACH", 0.0)
+        own_only = errors()
+    assert worst[lead].mean() < 0.3 and own_only[lead].mean() > 0.4
+    assert worst[side].mean() < 0.16  # 0.178 without circles, 0.153 without the filled reads
 
 
 def test_noise_alone_does_not_make_a_point_worth_a_circle(monkeypatch):
@@ -229,9 +240,10 @@ def test_noise_alone_does_not_make_a_point_worth_a_circle(monkeypatch):
 def test_a_denser_blade_reads_its_leading_edge_on_a_thinned_share(monkeypatch):
     # 100,000 points (leading edge of 8 spacings' radius, 2.9 plan spacings): the circles at
     # full density do not reach round it and the anchored fits read it 1.72; the circles of
-    # the quarter share 0.379 (the 20,000-point blade's own circles 0.46). The wedge beside
-    # the trailing edge fits circles through both sides at that share, of at most 1.6 plan
-    # spacings: read (COARSE_MIN_RADIUS = 0), they raised the sides from 0.438 to 0.524.
+    # the quarter share 0.379 (the 20,000-point blade's own circles 0.22). The faces past
+    # its arcs' ends are fitted again without the edge: the sides 0.438 -> 0.412. The wedge
+    # beside the trailing edge fits circles through both sides at that share, of at most 1.6
+    # plan spacings: read (COARSE_MIN_RADIUS = 0), they raise the sides to 0.506.
     from curvature.estimators import auto
 
     blade = synthetic.blade(n=100_000, noise=0.1, seed=1)
@@ -250,7 +262,7 @@ def test_a_denser_blade_reads_its_leading_edge_on_a_thinned_share(monkeypatch):
         m.setattr(auto, "COARSE_MIN_RADIUS", 0.0)
         unguarded, _ = errors()
     assert worst[lead].mean() < 0.5 and full_only[lead].mean() > 1.4
-    np.testing.assert_allclose(worst[side].mean(), full_only[side].mean(), rtol=0.01)
+    assert worst[side].mean() < 0.96 * full_only[side].mean()
     assert unguarded[side].mean() > 1.1 * full_only[side].mean()
     # the shares are thinned by a hash of the coordinates: each tile thins its points alike
     _, tiled = errors(tile_points=40_000)
