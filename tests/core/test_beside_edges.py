@@ -175,12 +175,12 @@ def test_the_blades_sides_beside_its_leading_edge_read_flat(monkeypatch):
 
 def test_a_bent_walls_faces_beside_its_rims_and_the_rims_themselves(monkeypatch):
     # A wall bent round an axis (faces k = +0.94 and -1, rims k = 33 of 2.6 spacings): the
-    # faces within 0.15 of a rim read 2.28 without the refits (seed 1; median 0.66), 0.75
-    # with them (median 0.053; 1.62 while the faces left out with the edge were not fitted
+    # faces within 0.15 of a rim read 2.31 without the refits (seed 1; median 0.66), 0.81
+    # with them (median 0.054; 1.62 while the faces left out with the edge were not fitted
     # again). Rim points a spacing or more from a face keep their reads. Within a spacing of
     # a rim's junction with a face (either side) the curvature jumps by 33: there the mean
-    # error is 4.8 with the refits and 8.5 without (medians 0.41 and 8.5), though more rim
-    # points next to a face read the face's curvature.
+    # error is 4.6 with the refits and 8.5 without (medians 0.45 and 8.4), though rim points
+    # next to a face may read the face's curvature (rim side 2.8 against 2.0).
     points, normals, k, part = _bent_wall()
     inside = (points[:, 2] > 0.05) & (points[:, 2] < 0.95)
     near = np.abs(np.arctan2(points[:, 1], points[:, 0])) > 0.45
