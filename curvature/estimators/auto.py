@@ -1129,8 +1129,9 @@ class AutoRun:
             count = cKDTree(centres).query_ball_point(
                 centres, FILL_REACH * circles[-1], return_length=True,
                 workers=numba.get_num_threads())
-            circles = tuple(x[count >= FILL_CONFIRM] for x in circles)
-            filled = self._offset_reads(circles, self.points[circles[0]], FILL_REACH, taken)
+            confirmed = count >= FILL_CONFIRM
+            circles = tuple(x[confirmed] for x in circles)
+            filled = self._offset_reads(circles, centres[confirmed], FILL_REACH, taken)
             if filled is not None:
                 taken[filled[0]] = True
                 # (which circle a point reads, and whether it may, depends on the points
@@ -1147,16 +1148,15 @@ class AutoRun:
         None where none does."""
         if centres.shape[0] == 0:
             return None
-        count = min(READ_CIRCLES, centres.shape[0])
+        count = min(READ_CIRCLES, centres.shape[0])  # (so every distance is finite)
         d, nearest = cKDTree(centres).query(self.points, count,
                                             workers=numba.get_num_threads())
         d, nearest = d.reshape(-1, count), nearest.reshape(-1, count)
         done = taken | self.outliers
         reads = []
         for col in range(count):  # the nearest circle first, then the next ...
-            found = np.isfinite(d[:, col])
-            j = np.where(found, nearest[:, col], 0)
-            near = np.flatnonzero(found & (d[:, col] <= share * circles[-1][j]) & ~done)
+            j = nearest[:, col]
+            near = np.flatnonzero((d[:, col] <= share * circles[-1][j]) & ~done)
             j = j[near]
             read = _read_circles(tuple(x[j] for x in circles), near,
                                  self.points[near] - centres[j], self._noise())
