@@ -234,8 +234,11 @@ COARSE_SHARES = (0.25, 0.0625)
 COARSE_MIN_POINTS = 8000
 # ... and only their circles of this many plan spacings' radius and more (those at full
 # density read up to about 1.3: the 20,000-point blade's leading edge; the 100,000-point one's
-# is 2.9).
-COARSE_MIN_RADIUS = 2.0
+# is 2.9; the wedge beside its trailing edge, at the quarter share, up to 1.6). 2.0 until stop
+# 47: at 40,000 to 50,000 points the leading edge is 1.9 to 2.1 and its circles read either
+# side of 2.0, so part of the arc read none and was fitted as a face (k1 2 to 5 for 20): the
+# leading edge read 1.4 to 5.9 (seeds 1 to 3), 0.36 to 0.64 with 1.8.
+COARSE_MIN_RADIUS = 1.8
 # The points of a rounded edge that read no circle of their own (its candidates and fan test
 # miss some, its fit fails at others) read the nearest circle fitted at full density where
 # they lie on its arc, within this share of that circle's list radius: on the 20,000-point

@@ -26,13 +26,15 @@ At a point, for each size K of a short ladder of nearest-neighbor lists (:data:`
    fit), the angle its inliers span around the centre and the largest gap between them.
 
 A circle is usable with at least :data:`MIN_INLIERS` inliers, a radius of at least
-:data:`RADIUS_NOISE` noise, a curvature of at least :data:`SIGNIFICANCE` standard errors and
-no gap along its arc above :data:`GAP_MAX` degrees. A point reads an edge where a usable
-circle spans at least :data:`SPAN_GATE` degrees (the bench's blade's leading edge about 200,
-a plate's rim 220; a fillet between faces at right angles 140); the size kept is the largest
-whose curvature agrees with every smaller one within :data:`AGREEMENT` of their summed
-standard errors (Lepski's rule, as the default's scale selection). The curvature along the
-axis is the slope of the inliers' normals' axial component against their axial offset.
+:data:`RADIUS_NOISE` noise, a curvature of at least :data:`SIGNIFICANCE` standard errors, no
+gap along its arc above :data:`GAP_MAX` degrees and, under :data:`SMALL_RADIUS_NOISE` noise,
+no more than :data:`BEYOND_MAX` points beyond its arc (a wedge's sides run on past it). A
+point reads an edge where a usable circle spans at least :data:`SPAN_GATE` degrees (the
+bench's blade's leading edge about 200, a plate's rim 220; a fillet between faces at right
+angles 140); the size kept is the largest whose curvature agrees with every smaller one
+within :data:`AGREEMENT` of their summed standard errors (Lepski's rule, as the default's
+scale selection). The curvature along the axis is the slope of the inliers' normals' axial
+component against their axial offset.
 
 The point takes the circle's curvatures, its radius as normal and the axis as a principal
 direction where it lies on the circle (within :data:`TRIM_NOISE` noise) and inside the arc
@@ -46,10 +48,10 @@ from numba import njit, prange
 
 from .linalg import cholesky, jacobi3, solve_lower, solve_upper_t
 
-__all__ = ["AGREEMENT", "AXIS_MIN", "EDGE_FAN_K", "EDGE_FLAT", "EDGE_FLAT_NOISE", "EDGE_KEEP",
-           "EDGE_LADDER", "EDGE_NORMAL_K", "FAN_MIN", "GAP_MAX", "MIN_INLIERS",
-           "NORMAL_TOLERANCE", "RADIUS_NOISE", "SIGNIFICANCE", "SPAN_GATE", "TRIM_NOISE",
-           "edge_circle_fits", "read_edge_circles", "worth_trying", "wraps"]
+__all__ = ["AGREEMENT", "AXIS_MIN", "BEYOND_MAX", "EDGE_FAN_K", "EDGE_FLAT", "EDGE_FLAT_NOISE",
+           "EDGE_KEEP", "EDGE_LADDER", "EDGE_NORMAL_K", "FAN_MIN", "GAP_MAX", "MIN_INLIERS",
+           "NORMAL_TOLERANCE", "RADIUS_NOISE", "SIGNIFICANCE", "SMALL_RADIUS_NOISE", "SPAN_GATE",
+           "TRIM_NOISE", "edge_circle_fits", "read_edge_circles", "worth_trying", "wraps"]
 
 #: Points whose stage-1 neighborhood's flatness (smallest covariance eigenvalue over the
 #: trace, :func:`~curvature.fitting.normal_field.pca_flatness`) is at least this are tried: a
@@ -90,9 +92,23 @@ TRIM_NOISE = 3.0
 #: slower than the surface); 35 read rims and leading edges 2.1 and 1.4 times worse.
 NORMAL_TOLERANCE = 25.0
 #: Smallest radius of a usable circle, in noise standard deviations: within the trimming band
-#: of a smaller one lies a whole disk of noisy points (a noisy plane at 0.5 % noise read half
-#: turns at 5 % of its points otherwise).
-RADIUS_NOISE = 6.0
+#: of one under TRIM_NOISE lies a whole disk of noisy points (a noisy plane at 0.5 % noise read
+#: half turns at 5 % of its points without this and SIGNIFICANCE). 6 until stop 47 left the
+#: trailing edge of the 100,000-point blade unread (radius 4.4 noise, 1.6 spacings): 45.0 ->
+#: 19.5 with 4 (k = 100), 11.4 with 3; but at 3 circles through both sides of a wedge (3 to 4
+#: noise) passed SMALL_RADIUS_NOISE's test more often, and the 20,000-point blade's sides at
+#: 0.5 % per-axis noise rose 17 % (docs/accuracy.md, section 9, step 25).
+RADIUS_NOISE = 4.0
+#: A circle under this many noise standard deviations in radius is used only where at most
+#: BEYOND_MAX points of its list lie outside it, beyond the trimming band, within its arc less
+#: the end bands (:func:`_beyond`). Across a rounded end hardly any do: at most 1 for 90 % of
+#: the small circles of the 100,000-point blade's trailing edge at 0.1 % noise, of the
+#: 20,000-point blade's leading edge at 0.5 % and of the plate's rims at 0.25 and 0.5 %. A
+#: circle through both sides of a wedge, in noise of a quarter of its radius, has the wedge
+#: running on past it: 2 to 13 at the 10th percentile, 15 to 42 at the median (the
+#: 20,000-point blade's sides within 0.4 of its trailing edge at 0.25 and 0.5 % noise).
+SMALL_RADIUS_NOISE = 6.0
+BEYOND_MAX = 1
 #: ... its curvature, in its standard errors (a leading edge reads 70, a rim 30).
 SIGNIFICANCE = 10.0
 #: Largest gap (degrees) between inliers along the arc: a blade's sides either side of a
@@ -340,7 +356,27 @@ def _fit_one(points, field, p, nbr, count, noise, frame, circle):
     r = circle[2]
     if r < RADIUS_NOISE * noise or not std_r / (r * r) * SIGNIFICANCE < 1.0 / r:
         return fail
+    if r < SMALL_RADIUS_NOISE * noise and (_beyond(u, v, count, circle, start, span, band)
+                                           > BEYOND_MAX):
+        return fail  # a wedge's sides, which run on past the arc
     return 1.0 / r, std_r / (r * r), span, start, inliers, w
+
+
+@njit(cache=True)
+def _beyond(u, v, count, circle, start, span, band):
+    """How many of the first ``count`` points (cross-section coordinates ``u``, ``v``) lie
+    farther than ``band`` outside ``circle`` (centre and radius) within its arc (from
+    ``start``, spanning ``span`` radians) less the end bands."""
+    trim = np.radians(NORMAL_TOLERANCE)
+    out = 0
+    for i in range(count):
+        du, dv = u[i] - circle[0], v[i] - circle[1]
+        if np.sqrt(du * du + dv * dv) <= circle[2] + band:
+            continue
+        offset = (np.arctan2(dv, du) - start) % (2.0 * np.pi)
+        if trim <= offset <= span - trim:
+            out += 1
+    return out
 
 
 @njit(cache=True)

@@ -102,6 +102,38 @@ def test_a_half_round_rim_reads_its_radius_and_a_straight_axis():
     assert np.all(np.abs(dir2[read][:, 2]) > 0.99)
 
 
+def test_a_half_round_of_few_noise_radii_is_read():
+    # radius 5 noise standard deviations (the 100,000-point blade's trailing edge is 4.4 at
+    # 0.1 % noise): usable since stop 47, under RADIUS_NOISE = 6 no circle was; nothing lies
+    # beyond the arc, so the small circle passes the test against wedges (BEYOND_MAX)
+    radius = 0.03
+    noise = radius / 5.0
+    assert edge.RADIUS_NOISE < 5.0 < edge.SMALL_RADIUS_NOISE
+    ok, k = [], []
+    for seed in (1, 2, 3, 4):
+        points, _ = _profile_cloud(-np.pi / 2, np.pi / 2, radius, 0.1, 1000, noise, seed)
+        fits = _fit(points, _pca_normals(points), _near_apex(points, radius, 0.0), noise)
+        ok.append(fits[6])
+        k.append(fits[2][fits[6], 0])
+    assert np.concatenate(ok).mean() > 0.85
+    assert np.median(np.concatenate(k)) == pytest.approx(1 / radius, rel=0.1)
+
+
+def test_no_small_circle_through_the_sides_of_a_wedge():
+    # 0.5 % noise: within 0.4 of the blade's trailing edge (radius 0.01, 0.9 noise) circles
+    # through both sides of the wedge, 3 to 4 noise in radius, pass the other tests (at 39 %
+    # of these points with RADIUS_NOISE = 3 and no BEYOND_MAX); the wedge runs on past them.
+    # Its leading edge (4.4 noise) keeps its circles (72 %).
+    blade = synthetic.blade(n=20000, noise=0.5, seed=1)
+    points, noise = blade.points, blade.noise_sigma
+    normals = _pca_normals(points)
+    sides = blade.region_mask("side") & (points[:, 0] > 1.6)
+    wedge = _fit(points, normals, sides, noise)[6]
+    lead = _fit(points, normals, blade.region_mask("leading_edge"), noise)[6]
+    assert wedge.mean() < 0.01
+    assert lead.mean() > 0.5
+
+
 def test_other_points_read_a_circle_where_they_lie_on_its_arc():
     # read_edge_circles at offsets from the fitted point (the coarse levels' reads): a point
     # 30 degrees round the arc reads the circle with its own radius as normal; the same point
@@ -243,12 +275,16 @@ def test_a_denser_blade_reads_its_leading_edge_on_a_thinned_share(monkeypatch):
     # the quarter share 0.379 (the 20,000-point blade's own circles 0.22). The faces past
     # its arcs' ends are fitted again without the edge: the sides 0.438 -> 0.412. The wedge
     # beside the trailing edge fits circles through both sides at that share, of at most 1.6
-    # plan spacings: read (COARSE_MIN_RADIUS = 0), they raise the sides to 0.506.
+    # plan spacings: read (COARSE_MIN_RADIUS = 0), they raise the sides to 0.506 (0.552 since
+    # stop 47). The trailing edge (radius 0.01: 4.4 noise, 1.6 spacings) reads its circles at
+    # full density since RADIUS_NOISE is 4 (stop 47): 45.0 -> 19.5 (k = 100), the sides 0.413
+    # -> 0.348.
     from curvature.estimators import auto
 
     blade = synthetic.blade(n=100_000, noise=0.1, seed=1)
     lead = blade.region_mask("leading_edge") & blade.interior
     side = blade.region_mask("side") & blade.interior
+    trail = blade.region_mask("trailing_edge") & blade.interior
 
     def errors(**options):
         res = curvature.estimate(blade.points, normals=blade.normals, **options)
@@ -262,9 +298,31 @@ def test_a_denser_blade_reads_its_leading_edge_on_a_thinned_share(monkeypatch):
         m.setattr(auto, "COARSE_MIN_RADIUS", 0.0)
         unguarded, _ = errors()
     assert worst[lead].mean() < 0.5 and full_only[lead].mean() > 1.4
+    assert worst[trail].mean() < 30.0
     assert worst[side].mean() < 0.96 * full_only[side].mean()
     assert unguarded[side].mean() > 1.1 * full_only[side].mean()
     # the shares are thinned by a hash of the coordinates: each tile thins its points alike
     _, tiled = errors(tile_points=40_000)
     assert tiled.info["tiles"] > 1
     np.testing.assert_array_equal(tiled.k1, res.k1)
+
+
+def test_a_leading_edge_near_two_plan_spacings_reads_the_thinned_share(monkeypatch):
+    # 45,000 points: the leading edge's radius is 1.9 plan spacings, too wide for the circles at
+    # full density to reach round and within the quarter share's. With COARSE_MIN_RADIUS = 2
+    # (until stop 47) the share's circles read either side of it, the arc points that read none
+    # were fitted as faces (k1 2 to 5 for 20) and the edge read 4.8; with 1.8 every point
+    # reads a circle (0.46)
+    from curvature.estimators import auto
+
+    blade = synthetic.blade(n=45_000, noise=0.1, seed=1)
+    lead = blade.region_mask("leading_edge") & blade.interior
+
+    def lead_error():
+        res = curvature.estimate(blade.points, normals=blade.normals)
+        worst = np.fmax(np.abs(res.k1 - blade.k1), np.abs(res.k2 - blade.k2))
+        return worst[lead].mean()
+
+    assert lead_error() < 0.7
+    monkeypatch.setattr(auto, "COARSE_MIN_RADIUS", 2.0)
+    assert lead_error() > 2.0
