@@ -121,9 +121,9 @@ def test_a_half_round_of_few_noise_radii_is_read():
 
 def test_no_small_circle_through_the_sides_of_a_wedge():
     # 0.5 % noise: within 0.4 of the blade's trailing edge (radius 0.01, 0.9 noise) circles
-    # through both sides of the wedge, 3 to 4 noise in radius, pass the other tests (at 39 %
-    # of these points with RADIUS_NOISE = 3 and no BEYOND_MAX); the wedge runs on past them.
-    # Its leading edge (4.4 noise) keeps its circles (72 %).
+    # through both sides of the wedge, 3 to 5 noise in radius, pass the other tests (at 3 % of
+    # these points without BEYOND_MAX, 39 % with RADIUS_NOISE = 3 too); the wedge runs on past
+    # them. Its leading edge (4.4 noise) keeps its circles (72 %; 76 % without BEYOND_MAX).
     blade = synthetic.blade(n=20000, noise=0.5, seed=1)
     points, noise = blade.points, blade.noise_sigma
     normals = _pca_normals(points)
@@ -311,8 +311,7 @@ def test_a_leading_edge_near_two_plan_spacings_reads_the_thinned_share(monkeypat
     # 45,000 points: the leading edge's radius is 1.9 plan spacings, too wide for the circles at
     # full density to reach round and within the quarter share's. With COARSE_MIN_RADIUS = 2
     # (until stop 47) the share's circles read either side of it, the arc points that read none
-    # were fitted as faces (k1 2 to 5 for 20) and the edge read 4.8; with 1.8 every point
-    # reads a circle (0.46)
+    # were fitted as faces (k1 2 to 5 for 20) and the edge read 4.8; with 1.8 it reads 0.46
     from curvature.estimators import auto
 
     blade = synthetic.blade(n=45_000, noise=0.1, seed=1)
