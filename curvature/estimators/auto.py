@@ -237,7 +237,7 @@ COARSE_MIN_POINTS = 8000
 # is 2.9; the wedge beside its trailing edge, at the quarter share, up to 1.6). 2.0 until stop
 # 47: at 40,000 to 50,000 points the leading edge is 1.9 to 2.1 and its circles read either
 # side of 2.0, so part of the arc read none and was fitted as a face (k1 2 to 5 for 20): the
-# leading edge read 1.4 to 5.9 (seeds 1 to 3), 0.36 to 0.64 with 1.8.
+# leading edge read 0.52 to 5.9 (seeds 1 to 3; over 1.3 on 7 of the 9), 0.36 to 0.64 with 1.8.
 COARSE_MIN_RADIUS = 1.8
 # The points of a rounded edge that read no circle of their own (its candidates and fan test
 # miss some, its fit fails at others) read the nearest circle fitted at full density where
