@@ -271,6 +271,16 @@ def _axis_frame(field, nbr, count, frame):
     return s[i1, i1] / trace
 
 
+@njit(cache=True, inline="always")
+def _inside_arc(du, dv, start, span):
+    """Whether the direction (``du``, ``dv``) from a circle's centre lies within its arc (from
+    ``start``, spanning ``span`` radians) less the bands of :data:`NORMAL_TOLERANCE` degrees at
+    its ends, where the faces continue it."""
+    trim = np.radians(NORMAL_TOLERANCE)
+    offset = (np.arctan2(dv, du) - start) % (2.0 * np.pi)
+    return trim <= offset <= span - trim
+
+
 @njit(cache=True)
 def _fit_one(points, field, p, nbr, count, noise, frame, circle):
     """One trimmed circle fit over ``nbr[:count]`` around point ``p``.
@@ -342,11 +352,10 @@ def _fit_one(points, field, p, nbr, count, noise, frame, circle):
         kept = 0
         for i in range(count):
             if inner[i] != 0.0:
-                offset = (np.arctan2(v[i] - circle[1], u[i] - circle[0]) - start) % (2.0 * np.pi)
-                if offset < trim or offset > span - trim:
-                    inner[i] = 0.0
-                else:
+                if _inside_arc(u[i] - circle[0], v[i] - circle[1], start, span):
                     kept += 1
+                else:
+                    inner[i] = 0.0
         if kept >= MIN_INLIERS:
             refit = circle.copy()
             std_inner = _geometric(u, v, inner, refit)
@@ -367,14 +376,10 @@ def _beyond(u, v, count, circle, start, span, band):
     """How many of the first ``count`` points (cross-section coordinates ``u``, ``v``) lie
     farther than ``band`` outside ``circle`` (centre and radius) within its arc (from
     ``start``, spanning ``span`` radians) less the end bands."""
-    trim = np.radians(NORMAL_TOLERANCE)
     out = 0
     for i in range(count):
         du, dv = u[i] - circle[0], v[i] - circle[1]
-        if np.sqrt(du * du + dv * dv) <= circle[2] + band:
-            continue
-        offset = (np.arctan2(dv, du) - start) % (2.0 * np.pi)
-        if trim <= offset <= span - trim:
+        if np.sqrt(du * du + dv * dv) > circle[2] + band and _inside_arc(du, dv, start, span):
             out += 1
     return out
 
@@ -506,7 +511,6 @@ def read_edge_circles(noise, offsets, frame, circle, curv, std, arc, k1, k2, nor
         Output: the normal points away from the circle's centre.
     read : ndarray, shape (m,), bool
     """
-    trim = np.radians(NORMAL_TOLERANCE)
     band = TRIM_NOISE * noise
     for i in prange(frame.shape[0]):
         read[i] = False
@@ -518,8 +522,7 @@ def read_edge_circles(noise, offsets, frame, circle, curv, std, arc, k1, k2, nor
         rho = np.sqrt(u * u + v * v)
         if not (rho > 0.0 and abs(rho - circle[i, 2]) <= band):
             continue
-        offset = (np.arctan2(v, u) - arc[i, 0]) % (2.0 * np.pi)
-        if offset < trim or offset > arc[i, 1] - trim:
+        if not _inside_arc(u, v, arc[i, 0], arc[i, 1]):
             continue
         nr = np.empty(3)
         for c in range(3):
