@@ -657,10 +657,13 @@ def dense_stage1(points, tree, cand, spacing: float, k: int, normal_k: int, chun
     r_normal : ndarray, shape (m,)
         Distance to the ``k``-th neighbor.
     outlier : ndarray, shape (m,), bool
+    flat : ndarray, shape (m,)
+        How far each ``k``-neighborhood is from a plane (:func:`pca_flatness`): where a
+        rounded edge may be (:meth:`AutoRun._dense_edge_reads`).
     """
     m = cand.shape[0]
     kiso = min(ISOLATION_K, k)
-    field, r_normal = np.empty((m, 3)), np.empty(m)
+    field, r_normal, flat = np.empty((m, 3)), np.empty(m), np.empty(m)
     r_isolation, outlier = np.empty(m), np.zeros(m, bool)
     own = np.empty((m, 3))  # each point's normal over its normal_k neighbors
     step = max(64, chunk_size * 24 // k)  # neighbor entries of a 24-neighbor chunk
@@ -670,7 +673,7 @@ def dense_stage1(points, tree, cand, spacing: float, k: int, normal_k: int, chun
         nbr = indices.reshape(-1, k)
         r_normal[sl] = np.sqrt(d2[:, -1])
         r_isolation[sl] = np.sqrt(d2[:, kiso - 1])
-        pca_normals(points, query, indptr, indices, field[sl])
+        pca_flatness(points, query, indptr, indices, field[sl], flat[sl])
         pca_normals(points, query, *_prefix_csr(nbr, normal_k), own[sl])
         off_surface(points, query, np.ascontiguousarray(nbr[:, :normal_k]), own[sl], spacing,
                     outlier[sl])
@@ -678,7 +681,7 @@ def dense_stage1(points, tree, cand, spacing: float, k: int, normal_k: int, chun
             tick(sl.stop - sl.start)
     del own
     isolated(points, tree, r_isolation, outlier, rows=cand)
-    return cand, field, r_normal, outlier
+    return cand, field, r_normal, outlier, flat
 
 
 def whole_dense_stage1(points, tree, plan: AutoPlan, params: dict, chunk_size: int,
@@ -762,6 +765,9 @@ class AutoRun:
         self.shift_rows = np.empty(0, np.int64)
         self.shifts = np.empty((0, 3))
         self.edge_candidates = np.empty(0, np.int64)  # points tried for a rounded edge
+        # The share of the hash (:func:`thinned_points`) these points are, of the cloud they
+        # were thinned from (1: none); a coarser share of them must thin further below it.
+        self.hash_share = 1.0
         # RMS neighbor distance of each clean fit (its standard error's unit)
         self.clean_h = np.empty(points.shape[0]) if self.plan.clean else None
         # Whether the fits may reach beyond BASE_K (fit_k); not on a dense cloud's thinned
@@ -1124,17 +1130,8 @@ class AutoRun:
             fine = _read_circles(circles, circles[0], None, self._noise())
         if fine is not None:
             taken[fine[0]] = True
-            # Only circles their own point reads (not a box's corner, where a few cylinders
-            # fit but miss their own points: read at others they took a corner from 0.51 to
-            # 0.57), with FILL_CONFIRM such points within their reach.
-            circles = tuple(x[taken[circles[0]]] for x in circles)
-            centres = self.points[circles[0]]
-            count = cKDTree(centres).query_ball_point(
-                centres, FILL_REACH * circles[-1], return_length=True,
-                workers=numba.get_num_threads())
-            confirmed = count >= FILL_CONFIRM
-            circles = tuple(x[confirmed] for x in circles)
-            filled = self._offset_reads(circles, centres[confirmed], FILL_REACH, taken)
+            circles, centres = self._confirmed(circles, taken)
+            filled = self._offset_reads(circles, centres, FILL_REACH, taken)
             if filled is not None:
                 taken[filled[0]] = True
                 # (which circle a point reads, and whether it may, depends on the points
@@ -1143,35 +1140,59 @@ class AutoRun:
         coarse = _joined([r for r in self._coarse_edge_reads(kc, taken) if r[0].size])
         return fine, filled, coarse
 
-    def _offset_reads(self, circles, centres, share, taken):
+    def _confirmed(self, circles, own):
+        """The circles (as :meth:`_edge_circles` returns them) whose own point reads them
+        (``own`` (n,) bool) with :data:`FILL_CONFIRM` such points within :data:`FILL_REACH`
+        of their list radius, and their centres (c, 3).
+
+        Only circles their own point reads: not a box's corner, where a few cylinders fit but
+        miss their own points (read at others they took a corner from 0.51 to 0.57).
+        """
+        circles = tuple(x[own[circles[0]]] for x in circles)
+        centres = self.points[circles[0]]
+        count = cKDTree(centres).query_ball_point(
+            centres, FILL_REACH * circles[-1], return_length=True,
+            workers=numba.get_num_threads())
+        confirmed = count >= FILL_CONFIRM
+        return tuple(x[confirmed] for x in circles), centres[confirmed]
+
+    def _offset_reads(self, circles, centres, share, taken, noise=None):
         """The reads of ``circles`` (as :meth:`_edge_circles` returns them, fitted around
         ``centres`` (c, 3)) at the points no circle read yet (``taken`` (n,) bool) and no
         outliers: of the nearest of their :data:`READ_CIRCLES` nearest circles on whose arc
-        they lie (:func:`_read_circles`), within ``share`` of its list radius of its centre;
-        None where none does."""
+        they lie (:func:`_read_circles`, for a cloud of ``noise``: this cloud's by default),
+        within ``share`` of its list radius of its centre; None where none does."""
         if centres.shape[0] == 0:
             return None
-        count = min(READ_CIRCLES, centres.shape[0])  # (so every distance is finite)
-        d, nearest = cKDTree(centres).query(self.points, count,
+        noise = self._noise() if noise is None else noise
+        done = taken | self.outliers
+        open_ = np.flatnonzero(~done)
+        count = min(READ_CIRCLES, centres.shape[0])
+        # (beyond the widest reach no circle is read: those points' distances are inf)
+        d, nearest = cKDTree(centres).query(self.points[open_], count,
+                                            distance_upper_bound=share * circles[-1].max(),
                                             workers=numba.get_num_threads())
         d, nearest = d.reshape(-1, count), nearest.reshape(-1, count)
-        done = taken | self.outliers
         reads = []
         for col in range(count):  # the nearest circle first, then the next ...
-            j = nearest[:, col]
-            near = np.flatnonzero((d[:, col] <= share * circles[-1][j]) & ~done)
+            found = np.isfinite(d[:, col])
+            j = np.where(found, nearest[:, col], 0)
+            near = np.flatnonzero(found & (d[:, col] <= share * circles[-1][j])
+                                  & ~done[open_])
             j = j[near]
+            near = open_[near]
             read = _read_circles(tuple(x[j] for x in circles), near,
-                                 self.points[near] - centres[j], self._noise())
+                                 self.points[near] - centres[j], noise)
             if read is not None:
                 done[read[0]] = True
                 reads.append(read)
         return _joined(reads)
 
-    def _coarse_edge_reads(self, kc, taken) -> list:
+    def _coarse_edge_reads(self, kc, taken, reader=None) -> list:
         """Circles fitted on thinned shares of the cloud (:data:`COARSE_SHARES`), read at the
-        points no finer level's circle reads (``taken`` (n,) bool, updated); one read tuple
-        per level that has any.
+        points of ``reader`` (an :class:`AutoRun`; this one by default) no finer level's
+        circle reads (``taken`` (reader's n,) bool, updated); one read tuple per level that
+        has any.
 
         The circle fits' scale is set in neighbors (their ladder, the fan and flatness tests),
         so on a denser cloud an edge spans more spacings than a list reaches round: the
@@ -1194,7 +1215,7 @@ class AutoRun:
         coarser = None  # the coarser share's candidates, and how far from them to look
         levels = []
         for share in shares[::-1]:
-            idx = thinned_points(self.points, share)
+            idx = thinned_points(self.points, share * self.hash_share)
             idx = idx[~self.outliers[idx]]
             sub = AutoRun(np.ascontiguousarray(self.points[idx]), self.params, self.chunk_size,
                           None, plan=self.plan)
@@ -1214,7 +1235,8 @@ class AutoRun:
                                         min(kc, idx.shape[0] - 1))
             if circles is None:
                 continue
-            reads = self._offset_reads(circles, sub.points[circles[0]], 1.0, taken)
+            reads = (reader or self)._offset_reads(circles, sub.points[circles[0]], 1.0, taken,
+                                                   self._noise())
             if reads is not None:
                 # (the full density's circles read radii up to about 1.3 plan spacings)
                 wide = np.fmax(np.abs(reads[1]), np.abs(reads[2])) * COARSE_MIN_RADIUS <= (
@@ -1520,12 +1542,13 @@ class AutoRun:
         The thinned points run the noisy branch as a cloud of their own, with stage-1 normals
         over as many of the whole cloud's points as the share leaves out (normal_k / share),
         so they average more points than the thinned cloud holds; each row reads the model
-        of its nearest thinned point's anchor at its own position.
+        of its nearest thinned point's anchor at its own position, and the rows on a rounded
+        edge its circles (:meth:`_dense_edge_reads`).
         """
         n = self.points.shape[0]
         share = self.plan.dense_share
         t0 = time.perf_counter()
-        idx, field, r_normal = self._dense_stage1(graph, rows, given)
+        idx, field, r_normal, flat = self._dense_stage1(graph, rows, given)
         self.timings["stage1"] = time.perf_counter() - t0
         sub = np.ascontiguousarray(self.points[idx])
         ns = idx.shape[0]
@@ -1538,6 +1561,11 @@ class AutoRun:
         # at every thinned anchor of a 10M-point cloud would cost a 1536-neighbor query each:
         # its fits stop at BASE_K.
         inner.widen = False
+        inner.hash_share = share
+        # Its rounded edges are looked for where the stage-1 neighborhoods (over the whole
+        # cloud's points) are far from flat, as in _stage1.
+        inner.edge_candidates = np.flatnonzero(worth_trying(flat, r_normal, inner._noise()))
+        del flat
         reps, owner = grid_cells(sub, np.asarray(inner.plan.origin), inner.plan.cell)
         t0 = time.perf_counter()
         # Each row reads the anchor of its nearest thinned point; the second pass fits only
@@ -1553,6 +1581,7 @@ class AutoRun:
                                                        min(inner.fit_k(), ns - 1), wanted)
         reps = reps[wanted]
         del field, r_normal, owner, wanted
+        edges = self._dense_edge_reads(inner, rows, min(inner.fit_k(), ns - 1))
         self.tree = inner.tree = None  # as in _anchored: the reads need only the fits
         release_freed_memory()
         for name, sec in inner.timings.items():
@@ -1575,6 +1604,48 @@ class AutoRun:
             self.reach = np.full(n, np.nan)
             d = np.linalg.norm(self.points[rows] - sub[reps[anchor_of]], axis=1)
             self.reach[rows] = 2.0 * d + fit_reach[anchor_of] + np.sqrt(3.0) * inner.plan.cell
+        for reads in edges:
+            if reads is not None:
+                self._store_rounded_edges(res, reads, rows)
+
+    def _dense_edge_reads(self, inner, rows, kc):
+        """The rounded edges of a dense cloud (:meth:`_rounded_edges`), fitted on its thinned
+        share ``inner`` (an :class:`AutoRun` over it, ``kc`` its fits' largest size) and read
+        at ``rows``: the share's own circles that their point reads, within
+        :data:`FILL_REACH` of their list radius (its points among the rows read their own),
+        then its coarser shares' circles. Without them a dense blade's leading edge read its
+        anchored fits alone (the 1,000,000-point blade at 0.25 % noise 4.2; docs/accuracy.md
+        section 9, step 26).
+
+        Returns
+        -------
+        own, coarse : tuple or None
+            The reads as :meth:`_rounded_edges` returns them (points index this cloud).
+        """
+        t0 = time.perf_counter()
+        n, ns = self.points.shape[0], inner.points.shape[0]
+        noise = inner._noise()  # (this cloud's plan sees noise comparable to its spacing)
+        circles = inner._edge_circles(np.arange(ns, dtype=np.int64), kc)
+        taken = np.ones(n, bool)  # only the rows read
+        taken[rows] = False
+        own = None
+        fine = None if circles is None else _read_circles(circles, circles[0], None, noise)
+        if fine is not None:
+            read = np.zeros(ns, bool)
+            read[fine[0]] = True
+            circles, centres = inner._confirmed(circles, read)
+            own = self._offset_reads(circles, centres, FILL_REACH, taken, noise)
+            if own is not None:
+                taken[own[0]] = True
+                # (a circle is used where FILL_CONFIRM points within FILL_REACH read their
+                # own, each of which depends on its list)
+                own = own[:-1] + (2.0 * own[-1],)
+        coarse = _joined([r for r in inner._coarse_edge_reads(kc, taken, self) if r[0].size])
+        self.timings["dense rounded edges"] = time.perf_counter() - t0
+        # A circle through s thinned points spans the patch of s / share points (as in _dense).
+        share = self.plan.dense_share
+        return tuple(None if r is None else r[:-2] + (np.rint(r[-2] / share).astype(np.int64),
+                                                      r[-1]) for r in (own, coarse))
 
     def _dense_stage1(self, graph, rows, given=None):
         """The stage-1 work of a dense cloud: orientation graph rows at ``rows`` and, unless
@@ -1585,8 +1656,9 @@ class AutoRun:
         -------
         idx : ndarray, shape (s,), int64
             The thinned points that are no outliers.
-        field, r_normal : ndarray, shapes (s, 3) and (s,)
-            Their normals and the distance to the last neighbor behind each.
+        field, r_normal, flat : ndarray, shapes (s, 3), (s,) and (s,)
+            Their normals, the distance to the last neighbor behind each and how far from a
+            plane those neighbors lie.
         """
         self._total = (2 if graph is not None else 1) * rows.shape[0]
         if graph is not None:
@@ -1596,10 +1668,10 @@ class AutoRun:
             self._total += cand.shape[0]
             given = whole_dense_stage1(self.points, self.tree, self.plan, self.params,
                                        self.chunk_size, self._tick, cand)
-        cand, field, r_normal, outlier = given
+        cand, field, r_normal, outlier, flat = given
         self.outliers[cand[outlier]] = True
         keep = ~outlier
-        return cand[keep], field[keep], r_normal[keep]
+        return cand[keep], field[keep], r_normal[keep], flat[keep]
 
     def _model(self, field, r_normal, reps, owner, kc, wanted=None):
         """The anchors' fits of both passes: the first refines the normals (in ``field``;

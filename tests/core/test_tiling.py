@@ -256,10 +256,11 @@ def test_dense_tiles_share_one_stage1_and_hold_only_thinned_halos(monkeypatch):
     spts = np.ascontiguousarray(pts[morton_order(pts)])
     req = resolve_request(None, None, None, {"dense_noise": 0.3}, None, None, None, 1, 2000)
     run = tiling.TiledRun(spts, None, req, 5000)
-    thin, field, r_normal, outlier = run.dense_stage1
+    thin, field, r_normal, outlier, flat = run.dense_stage1
     share = run.plan.dense_share
     assert abs(thin.size / len(pts) - share) < 0.02 and np.all(np.diff(thin) > 0)
     assert field.shape == (thin.size, 3) and r_normal.shape == outlier.shape == thin.shape
+    assert flat.shape == thin.shape
     for tile in run.tiles:
         inp = run.input(tile)
         own = (inp.members >= tile.start) & (inp.members < tile.stop)
