@@ -69,6 +69,7 @@ from ..fitting.normal_field import (
 )
 from ..fitting.normal_quadric import N_QUAD
 from ..fitting.outliers import ISOLATION_K, isolated, off_surface
+from ..fitting.parallel_sheets import SHEET_K, parallel_sheets
 from ..fitting.rounded_edge import (
     EDGE_FAN_K,
     EDGE_KEEP,
@@ -259,6 +260,10 @@ FILL_CONFIRM = 3
 # 3.87 / 3.57 / 3.52; the bent wall's faces near the rims 0.75 -> 0.80 / 0.81 / 0.87, where
 # more points at a rim's junction with a face read the rim.
 READ_CIRCLES = 4
+# Fits whose RMS distance to their points exceeds this many noise standard deviations are
+# tested for two parallel sheets (AutoRun._sheets): the thin plate's over both faces read 4 to
+# 9 at 0.05 to 0.25 % noise (2.3 at 0.5 %, where the faces' parallel test decides nothing).
+SHEET_DISTANCE = 2.0
 # Neighbors looked at beyond normal_k when the outliers are left out of a stage-1 normal.
 RENORMAL_EXTRA = 16
 # Neighbors of the wide noise measurement (AutoPlan.wide_noise).
@@ -1867,8 +1872,30 @@ class AutoRun:
             sigma = sigma * sigma_share
         # The kept fit's scale: the quadric's unit where it (or a rung) was kept.
         h = np.where(model == MODEL_QUADRIC, quad_scale, scale)
-        err = anchored_std(sigma, bias, resid, h, self._noise())
+        noise = self._noise()
+        err = anchored_std(sigma, bias, resid, h, noise, self._sheets(anchors, field, resid, noise))
         return (coef, scale, frame, quad, quad_scale, model, resid, status), reach, chosen, err
+
+    def _sheets(self, anchors, field, resid, noise):
+        """Which anchors' fits lie over two parallel sheets of a thin wall
+        (:func:`~curvature.fitting.parallel_sheets.parallel_sheets`), shape (a,), bool;
+        tested only where the fit's distance ``resid`` exceeds :data:`SHEET_DISTANCE` times
+        the cloud's ``noise`` (elsewhere nothing would change)."""
+        out = np.zeros(anchors.shape[0], bool)
+        if not np.isfinite(noise):
+            return out
+        rows = np.flatnonzero(resid > SHEET_DISTANCE * noise)
+        k = min(SHEET_K, self.points.shape[0] - 1)
+        step = max(64, self.chunk_size * 24 // k)
+        for start in range(0, rows.shape[0], step):
+            at = rows[start:start + step]
+            query = anchors[at]
+            indptr, indices, _ = knn_csr(self.points, self.tree, query, k)
+            found = np.zeros(at.shape[0], bool)
+            parallel_sheets(self.points, query, np.ascontiguousarray(field[query]), indptr,
+                            indices, found)
+            out[at] = found
+        return out
 
     def _fit_lists(self, anchors, rows, listed, fit, outputs, reach, drop=None) -> None:
         """:func:`~curvature.fitting.scale_selection.multiscale_anchor_fits` at

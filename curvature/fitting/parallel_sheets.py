@@ -1,0 +1,132 @@
+"""Fits over both faces of a thin wall with parallel faces (the default's standard errors).
+
+An anchored fit on a wall a few spacings thick holds both of its faces: its points lie in
+two layers, the wall's thickness apart along the normal. Where the faces are parallel the fit
+reads their curvature well (docs/accuracy.md, section 9, step 25), but its RMS distance to
+its surface is half the wall's thickness, not the noise, and the standard errors read from
+it (the calibrated sigma and the model term of :func:`curvature.uncertainty.anchored_std`)
+were 20 to 400 times the errors on the thin plate (docs/accuracy.md, section 10, stop 48).
+
+A neighborhood holds two parallel sheets when its heights over the anchor's tangent plane
+split into two groups (the split of the sorted heights with the largest gap between the
+groups' means over their pooled standard deviation, each group at least
+:data:`SHEET_SHARE` of the points) at least :data:`SHEET_GAP` pooled deviations apart, and
+the planes fitted to the two groups have slopes within :data:`SHEET_SLOPE` of each other. A
+wedge (a blade's sides near its trailing edge) is two sheets but not parallel: a fit across it
+tilts with the wedge, and its residual is that misfit.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+__all__ = ["SHEET_GAP", "SHEET_K", "SHEET_SHARE", "SHEET_SLOPE", "parallel_sheets"]
+
+#: Neighbors of the test: on the thin plate of 10,000 points (faces 3 spacings apart) the 48
+#: nearest hold a fifth of the other face, the 96 nearest a third.
+SHEET_K = 96
+#: Smallest share of the points in each group.
+SHEET_SHARE = 0.1
+#: Smallest gap between the groups' mean heights, in pooled standard deviations: a single
+#: noisy sheet split at its median reads about 2.7, the plate's faces 10 to 30.
+SHEET_GAP = 6.0
+#: Largest difference of the two groups' slopes (rise over run): 0.05 is 3 degrees; the
+#: blade's wedge is 12 degrees. 0.1 let some fits near its trailing edge pass.
+SHEET_SLOPE = 0.05
+
+
+@njit(cache=True)
+def _plane_slope(h, u, v, idx, out):
+    """Slope (du, dv) of the least-squares plane ``h = a + b u + c v`` over ``idx``, into
+    ``out``; False where the points span no plane."""
+    s1 = su = sv = suu = suv = svv = sh = suh = svh = 0.0
+    for i in idx:
+        s1 += 1.0
+        su += u[i]
+        sv += v[i]
+        suu += u[i] * u[i]
+        suv += u[i] * v[i]
+        svv += v[i] * v[i]
+        sh += h[i]
+        suh += u[i] * h[i]
+        svh += v[i] * h[i]
+    # centred normal equations of (b, c)
+    cuu = suu - su * su / s1
+    cuv = suv - su * sv / s1
+    cvv = svv - sv * sv / s1
+    cuh = suh - su * sh / s1
+    cvh = svh - sv * sh / s1
+    det = cuu * cvv - cuv * cuv
+    if not det > 1e-12 * max(cuu * cvv, 1e-300):
+        return False
+    out[0] = (cvv * cuh - cuv * cvh) / det
+    out[1] = (cuu * cvh - cuv * cuh) / det
+    return True
+
+
+@njit(parallel=True, cache=True)
+def parallel_sheets(points, anchors, normals, indptr, indices, out):
+    """Whether each anchor's neighbors lie on two parallel sheets (module docstring).
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+    anchors : ndarray, shape (a,), int64
+    normals : ndarray, shape (a, 3)
+        Unit normals at the anchors (NaN: the test fails).
+    indptr, indices : ndarray
+        CSR neighbor lists of the anchors.
+    out : ndarray, shape (a,), bool
+        Output.
+    """
+    for j in prange(anchors.shape[0]):
+        out[j] = False
+        nrm = normals[j]
+        if not (np.isfinite(nrm[0]) and np.isfinite(nrm[1]) and np.isfinite(nrm[2])):
+            continue
+        nbr = indices[indptr[j]:indptr[j + 1]]
+        m = nbr.shape[0]
+        least = max(int(SHEET_SHARE * m), 3)
+        if m < 2 * least:
+            continue
+        # a tangent frame
+        ax = np.array([1.0, 0.0, 0.0]) if abs(nrm[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        e1 = np.cross(nrm, ax)
+        e1 /= np.sqrt(np.sum(e1 * e1))
+        e2 = np.cross(nrm, e1)
+        p = points[anchors[j]]
+        h, u, v = np.empty(m), np.empty(m), np.empty(m)
+        for i in range(m):
+            d = points[nbr[i]] - p
+            h[i] = d[0] * nrm[0] + d[1] * nrm[1] + d[2] * nrm[2]
+            u[i] = d[0] * e1[0] + d[1] * e1[1] + d[2] * e1[2]
+            v[i] = d[0] * e2[0] + d[1] * e2[1] + d[2] * e2[2]
+        order = np.argsort(h)
+        total = total2 = 0.0
+        for i in range(m):
+            total += h[i]
+            total2 += h[i] * h[i]
+        best, split = 0.0, -1
+        low = low2 = 0.0
+        for c in range(1, m):
+            x = h[order[c - 1]]
+            low += x
+            low2 += x * x
+            if c < least or m - c < least:
+                continue
+            lm = low / c
+            hm = (total - low) / (m - c)
+            within = (low2 - low * lm) + ((total2 - low2) - (total - low) * hm)
+            if not within > 0.0:
+                continue
+            gap = (hm - lm) / np.sqrt(within / (m - 2))
+            if gap > best:
+                best, split = gap, c
+        if best < SHEET_GAP:
+            continue
+        s_low, s_high = np.empty(2), np.empty(2)
+        if not (_plane_slope(h, u, v, order[:split], s_low)
+                and _plane_slope(h, u, v, order[split:], s_high)):
+            continue
+        out[j] = np.hypot(s_low[0] - s_high[0], s_low[1] - s_high[1]) < SHEET_SLOPE
