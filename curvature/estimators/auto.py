@@ -1873,19 +1873,21 @@ class AutoRun:
         # The kept fit's scale: the quadric's unit where it (or a rung) was kept.
         h = np.where(model == MODEL_QUADRIC, quad_scale, scale)
         noise = self._noise()
-        err = anchored_std(sigma, bias, resid, h, noise, self._sheets(anchors, field, resid, noise))
+        err = anchored_std(sigma, bias, resid, h, noise,
+                           self._sheets(anchors, field, resid, noise, k))
         return (coef, scale, frame, quad, quad_scale, model, resid, status), reach, chosen, err
 
-    def _sheets(self, anchors, field, resid, noise):
+    def _sheets(self, anchors, field, resid, noise, k):
         """Which anchors' fits lie over two parallel sheets of a thin wall
-        (:func:`~curvature.fitting.parallel_sheets.parallel_sheets`), shape (a,), bool;
+        (:func:`~curvature.fitting.parallel_sheets.parallel_sheets` over at most ``k``, the
+        fits' own neighbor count, so it reaches no farther than they do), shape (a,), bool;
         tested only where the fit's distance ``resid`` exceeds :data:`SHEET_DISTANCE` times
         the cloud's ``noise`` (elsewhere nothing would change)."""
         out = np.zeros(anchors.shape[0], bool)
         if not np.isfinite(noise):
             return out
         rows = np.flatnonzero(resid > SHEET_DISTANCE * noise)
-        k = min(SHEET_K, self.points.shape[0] - 1)
+        k = min(SHEET_K, k, self.points.shape[0] - 1)
         step = max(64, self.chunk_size * 24 // k)
         for start in range(0, rows.shape[0], step):
             at = rows[start:start + step]

@@ -5,7 +5,7 @@ two layers, the wall's thickness apart along the normal. Where the faces are par
 reads their curvature well (docs/accuracy.md, section 9, step 25), but its RMS distance to
 its surface is half the wall's thickness, not the noise, and the standard errors read from
 it (the calibrated sigma and the model term of :func:`curvature.uncertainty.anchored_std`)
-were 20 to 400 times the errors on the thin plate (docs/accuracy.md, section 10, stop 48).
+were 15 to 500 times its errors on the thin plate (docs/accuracy.md, section 10, stop 48).
 
 A neighborhood holds two parallel sheets when its heights over the anchor's tangent plane
 split into two groups (the split of the sorted heights with the largest gap between the
