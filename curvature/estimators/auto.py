@@ -1135,13 +1135,7 @@ class AutoRun:
             fine = _read_circles(circles, circles[0], None, self._noise())
         if fine is not None:
             taken[fine[0]] = True
-            circles, centres = self._confirmed(circles, taken)
-            filled = self._offset_reads(circles, centres, FILL_REACH, taken)
-            if filled is not None:
-                taken[filled[0]] = True
-                # (which circle a point reads, and whether it may, depends on the points
-                # that read their own within FILL_REACH of its centre, and on their lists)
-                filled = filled[:-1] + (2.0 * filled[-1],)
+            filled = self._filled_reads(circles, taken, taken)
         coarse = _joined([r for r in self._coarse_edge_reads(kc, taken) if r[0].size])
         return fine, filled, coarse
 
@@ -1160,6 +1154,21 @@ class AutoRun:
             workers=numba.get_num_threads())
         confirmed = count >= FILL_CONFIRM
         return tuple(x[confirmed] for x in circles), centres[confirmed]
+
+    def _filled_reads(self, circles, own, taken, reader=None, noise=None):
+        """The reads of the circles fitted on this cloud that :meth:`_confirmed` keeps (``own``
+        (n,) bool: the points that read their own) at the points of ``reader`` (an
+        :class:`AutoRun`; this one by default) no circle read yet (``taken``, updated), within
+        :data:`FILL_REACH` of their list radius (:meth:`_offset_reads`); None where none
+        does."""
+        circles, centres = self._confirmed(circles, own)
+        reads = (reader or self)._offset_reads(circles, centres, FILL_REACH, taken, noise)
+        if reads is not None:
+            taken[reads[0]] = True
+            # (which circle a point reads, and whether it may, depends on the points that
+            # read their own within FILL_REACH of its centre, and on their lists)
+            reads = reads[:-1] + (2.0 * reads[-1],)
+        return reads
 
     def _offset_reads(self, circles, centres, share, taken, noise=None):
         """The reads of ``circles`` (as :meth:`_edge_circles` returns them, fitted around
@@ -1638,13 +1647,7 @@ class AutoRun:
         if fine is not None:
             read = np.zeros(ns, bool)
             read[fine[0]] = True
-            circles, centres = inner._confirmed(circles, read)
-            own = self._offset_reads(circles, centres, FILL_REACH, taken, noise)
-            if own is not None:
-                taken[own[0]] = True
-                # (a circle is used where FILL_CONFIRM points within FILL_REACH read their
-                # own, each of which depends on its list)
-                own = own[:-1] + (2.0 * own[-1],)
+            own = inner._filled_reads(circles, read, taken, self, noise)
         coarse = _joined([r for r in inner._coarse_edge_reads(kc, taken, self) if r[0].size])
         self.timings["dense rounded edges"] = time.perf_counter() - t0
         # A circle through s thinned points spans the patch of s / share points (as in _dense).

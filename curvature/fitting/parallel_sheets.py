@@ -21,6 +21,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from .quadric import tangent_basis
+
 __all__ = ["SHEET_GAP", "SHEET_K", "SHEET_SHARE", "SHEET_SLOPE", "parallel_sheets"]
 
 #: Neighbors of the test: on the thin plate of 10,000 points (faces 3 spacings apart) the 48
@@ -90,11 +92,7 @@ def parallel_sheets(points, anchors, normals, indptr, indices, out):
         least = max(int(SHEET_SHARE * m), 3)
         if m < 2 * least:
             continue
-        # a tangent frame
-        ax = np.array([1.0, 0.0, 0.0]) if abs(nrm[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
-        e1 = np.cross(nrm, ax)
-        e1 /= np.sqrt(np.sum(e1 * e1))
-        e2 = np.cross(nrm, e1)
+        e1, e2 = tangent_basis(nrm)
         p = points[anchors[j]]
         h, u, v = np.empty(m), np.empty(m), np.empty(m)
         for i in range(m):
