@@ -106,6 +106,7 @@ from .beside_edges import (
     without,
 )
 from .sampling import cell_ijk, grid_keys, thinned
+from .umbilic_pass import umbilic_pass
 from .wall_sides import one_side_normals
 
 # Neighbors of the spacing and noise measurements and of the clean-cloud fit.
@@ -1101,6 +1102,23 @@ class AutoRun:
         for edges in reads:
             if edges is not None:
                 self._store_rounded_edges(res, edges, rows)
+        self._umbilic(res, rows, kc)
+
+    def _umbilic(self, res, rows, kc) -> None:
+        """Sphere fits at ``rows`` where they read a point better than its estimate
+        (:mod:`~curvature.estimators.umbilic_pass`; flat faces and sphere-like corners beside
+        features), over at most ``kc`` neighbors (docs/accuracy.md section 9, step 27)."""
+        t0 = time.perf_counter()
+
+        def nearest(idx, k):
+            _, indices, d2 = knn_csr(self.points, self.tree, idx, k)
+            return indices.reshape(-1, k), d2
+
+        umbilic_pass(self.points, nearest, res, rows, self._noise(), kc, self.outliers,
+                     self.chunk_size, self.reach if self.track_reach else None,
+                     1.0 / self.plan.spacing, self._grow_total, self._tick)
+        self.tree = None
+        self.timings["umbilic"] = time.perf_counter() - t0
 
     def _rounded_edges(self, rows, kc):
         """Circle fits across rounded thin edges (:mod:`~curvature.fitting.rounded_edge`) at

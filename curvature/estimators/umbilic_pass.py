@@ -1,0 +1,109 @@
+"""The default's last pass on noisy clouds: sphere fits where they read a point better.
+
+Flat faces and sphere-like corners bend alike in every direction; beside a feature the scale
+selection keeps small quadric fits there (their wider fits reach onto the feature), and
+those read three curvature terms from few points. A sphere fit of one curvature term
+(:mod:`curvature.fitting.umbilic`) over as many points reads such a point better. Its tests
+(an F test of k1 = k2, its residual against the noise, Lepski's rule over its sizes, a
+likelihood-ratio test of the kept estimate against it on the same points, agreement with
+the kept estimate) leave every other point as it was. Not run on dense clouds (their
+thinned share's fits are read at every point) nor on clean ones (exact implicit fits).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..fitting.umbilic import SIZES, f_critical, umbilic_fits
+from ..status import Status
+from ..uncertainty import with_floor
+
+__all__ = ["TRIED_SHARE", "candidates", "umbilic_pass"]
+
+
+#: Only estimates kept over at most this many times the largest sphere's neighbors are tried:
+#: a fit over 768 points and more (the default's on smooth surfaces) already reads far more
+#: precisely than a sphere over 192, and trying every point would cost a 192-neighbor query
+#: each.
+TRIED_SHARE = 2
+
+
+def candidates(res, rows: np.ndarray, largest: int) -> np.ndarray:
+    """The rows a sphere fit may replace, shape (c,), int64: estimated, over at most
+    :data:`TRIED_SHARE` times ``largest`` neighbors."""
+    ok = (res.status[rows] == Status.OK) & (res.neighbor_count[rows] <= TRIED_SHARE * largest)
+    return rows[ok]
+
+
+def umbilic_pass(points, query_nearest, res, rows, noise: float, largest: int,
+                 outliers: np.ndarray, chunk: int, reach=None, floor_scale=0.0, grow=None,
+                 tick=None):
+    """Replace the estimates of ``rows`` where a sphere fit reads them better, in place.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+    query_nearest : callable
+        ``query_nearest(idx, k)`` -> (nbr (m, k) int, d2 (m, k)): the k nearest points of
+        ``points[idx]``, nearest first.
+    res : CurvatureResult
+        The estimates so far (k1, k2, their standard errors, normals, principal directions,
+        neighbor counts).
+    rows : ndarray, shape (r,), int64
+        The points whose estimates are wanted.
+    noise : float
+        The cloud's noise (length unit); nothing is done where it is not finite.
+    largest : int
+        Most neighbors a fit may use (a user's ``k`` holds here too).
+    outliers : ndarray, shape (n,), bool
+        Points left out of every fit.
+    chunk : int
+        Query points per batch.
+    reach : ndarray, shape (n,), optional
+        Each point's reach, raised in place to the distance of its farthest list neighbor.
+    floor_scale : float
+        1 / spacing: the rounding floor of the standard errors (:func:`with_floor`).
+    grow, tick : callable, optional
+        Progress: ``grow(m)`` announces the m points to be fitted, ``tick(m)`` reports m done.
+
+    Returns
+    -------
+    int
+        How many estimates were replaced.
+    """
+    n = points.shape[0]
+    sizes = np.array([s for s in SIZES if s <= min(largest, n)], np.int64)
+    if not np.isfinite(noise) or noise <= 0.0 or sizes.size == 0:
+        return 0
+    query_rows = candidates(res, rows, int(sizes[-1]))
+    if grow is not None:
+        grow(query_rows.shape[0])
+    fcrit = f_critical(sizes)
+    k = int(sizes[-1])
+    replaced = 0
+    for start in range(0, query_rows.shape[0], chunk):
+        query = query_rows[start:start + chunk]
+        nbr, d2 = query_nearest(query, k)
+        nbr = np.where(outliers[nbr], -1, nbr)
+        m = query.shape[0]
+        out_k, out_se = np.empty(m), np.empty(m)
+        out_count = np.empty(m, np.int64)
+        umbilic_fits(points, res.normals, res.dir1, res.dir2, query, nbr, noise, sizes, fcrit,
+                     res.k1[query], res.k2[query], res.k1_std[query], res.k2_std[query],
+                     res.neighbor_count[query].astype(np.int64), out_k, out_se, out_count)
+        if reach is not None:
+            reach[query] = np.fmax(reach[query], np.sqrt(d2[:, -1]))
+        ok = np.isfinite(out_k)
+        at = query[ok]
+        kk = out_k[ok]
+        std = with_floor(out_se[ok], kk, kk, floor_scale)
+        res.k1[at] = kk
+        res.k2[at] = kk
+        res.k1_std[at] = std
+        res.k2_std[at] = std
+        res.mean_std[at] = std
+        res.neighbor_count[at] = out_count[ok]
+        replaced += at.shape[0]
+        if tick is not None:
+            tick(m)
+    return replaced

@@ -1,0 +1,317 @@
+"""Sphere fits: one curvature where a point's patch bends alike in every direction.
+
+A flat face (k1 = k2 = 0) and a sphere (k1 = k2 = 1/R) are umbilic. Over a point's tangent
+frame (u, v along the plane, z along its normal) both satisfy ``z = c0 + c1 u + c2 v +
+c3 (u^2 + v^2 + z^2) / 2`` exactly, at any size: the algebraic sphere ``c3 |x|^2 / 2 +
+(c1, c2, -1) . x + c0 = 0`` (a plane where ``c3 = 0``; the fit of algebraic spheres of
+Guennebaud & Gross, SIGGRAPH 2007, reduced to a linear height regression by fixing the
+normal's coefficient), of curvature ``-c3 / sqrt(1 + c1^2 + c2^2 - 2 c0 c3)``. One curvature
+term where a quadric has three: fitted over the same points it is known about twice as well,
+and since a patch of m points spans ``h ~ sqrt(m)``, a curvature's standard error falls as
+``m^-1.5``, so a sphere fit over half the points a quadric kept reads the curvature about as
+well. (A height quadric ``(u^2 + v^2) / 2`` instead of the sphere's term reads a sphere too
+high by about ``h^2 / 4 R^2``: 0.4 at the filleted box's corners over 48 points.)
+
+At each point, over its nearest neighbors in order, for each size of :data:`SIZES`:
+
+1. the points join the fit unless, past the first size, they lie more than :data:`TRIM`
+   noise off the previous size's sphere (the other face of a thin wall, an outlier);
+2. the sphere and the sphere with two more terms, ``(u^2 - v^2) / 2`` and ``uv`` (unequal
+   principal curvatures), are fitted by least squares from one set of moments; the size is
+   usable when its inliers are at least :data:`MIN_SHARE` of the size, the sphere's residual
+   is within :data:`RESIDUAL` noise (no shape it does not follow, no second sheet), the F
+   statistic of the two terms is under its :data:`F_LEVEL` critical value (no difference
+   between the principal curvatures shows) and its curvature agrees with every smaller
+   size's within :data:`LEPSKI` of that one's standard error (Lepski's rule, as the
+   default's scale selection); the first size that is not ends the ladder;
+3. a usable size replaces the point's estimate (``k1 = k2``) where the points reject the
+   estimate in its favour: the estimate's curvatures (its k1 and k2 along its principal
+   directions, the constant and slopes fitted afresh) fit them worse than the sphere by more
+   than :data:`REJECT` times the sphere's residual variance; where the estimate reads as
+   well (a wide fit on a smooth surface) the points cannot tell them apart and it stays,
+   whatever its standard errors say. The size must also span :data:`SIZE_SHARE` of the
+   estimate's neighbors, agree with its k1 and k2 within :data:`AGREE` of their combined
+   standard errors, and have a standard error below the larger of the estimate's two (a
+   flat reading, within AGREE of its error of zero) or below both (a curved one). Of those
+   sizes, the one with the smallest standard error.
+
+The F test is the classic test of nested linear models (a restriction of q = 2
+coefficients). Curvature sign: positive where the surface bends away from the normal
+(DESIGN.md section 3).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+from scipy.stats import f as f_distribution
+
+from .linalg import cholesky, solve_lower, solve_upper_t
+from .quadric import tangent_basis_xyz
+
+__all__ = ["AGREE", "F_LEVEL", "LEPSKI", "MIN_REACH", "MIN_SHARE", "REJECT", "RESIDUAL",
+           "SIZES", "SIZE_SHARE", "TRIM", "f_critical", "umbilic_fits"]
+
+#: List sizes of the ladder (nearest neighbors, the point itself included). 24 is left out:
+#: its fits are too noisy to beat a kept estimate over the 48 neighbors and more it may
+#: replace.
+SIZES = (48, 96, 192)
+#: Past the first size a point joins the fit only within this many noise of the previous
+#: size's sphere.
+TRIM = 8.0
+#: A usable size's sphere residual (RMS, per degree of freedom) is at most this many noise.
+#: The default's noise is its plan's cubic-fit residual, about 1.27 times the true noise.
+RESIDUAL = 1.2
+#: Level of the F test of k1 = k2.
+F_LEVEL = 0.05
+#: A size's curvature agrees with every smaller one's within this many of its standard error.
+LEPSKI = 2.0
+#: A usable size may replace the kept estimate only where the estimate's curvatures fit its
+#: points worse than the sphere by more than this many times the sphere's residual variance
+#: (a likelihood-ratio test, 2 standard errors of the sphere's curvature): where the
+#: estimate reads as well (a wide fit on a smooth surface, whose standard errors may say
+#: otherwise) it stays.
+REJECT = 4.0
+#: ... where it agrees with the estimate's k1 and k2 within this many of their combined
+#: standard errors ...
+AGREE = 2.0
+#: ... spans at least this share of the estimate's neighbors ...
+SIZE_SHARE = 0.5
+#: Inliers of a usable size, at least this share of its size.
+MIN_SHARE = 0.5
+#: A size is used only where its list reaches this many noise from the point: the noise of
+#: the positions across the patch biases a least-squares curvature by about (noise / h)^2,
+#: and the points then reject the truth in favour of the biased fit (a sphere at 0.5 %
+#: noise, 48 points within 6.5 noise: curvature 1 read -1.2 to 3.6, rejected 9 to 24 times
+#: its residual variance).
+MIN_REACH = 12.0
+
+
+def f_critical(sizes=SIZES, level: float = F_LEVEL) -> np.ndarray:
+    """Critical values of the F test (2 and ``size - 6`` degrees of freedom), shape (s,)."""
+    return np.array([f_distribution.isf(level, 2, max(s - 6, 1)) for s in sizes])
+
+
+@njit(cache=True)
+def _solve(a, b):
+    """``a x = b`` for symmetric positive definite ``a``; ok False where it is not."""
+    l, ok = cholesky(a, 1e-12)
+    if not ok:
+        return b, False
+    return solve_upper_t(l, solve_lower(l, b)), True
+
+
+@njit(cache=True)
+def _inverse_diag(a, j):
+    """Entry (j, j) of ``a``'s inverse (``a`` symmetric positive definite), NaN where singular."""
+    e = np.zeros(a.shape[0])
+    e[j] = 1.0
+    x, ok = _solve(a, e)
+    return x[j] if ok else np.nan
+
+
+@njit(cache=True)
+def _current_terms(dir1, dir2, k1, k2, t10, t11, t12, t20, t21, t22):
+    """The estimate (k1, k2 along dir1, dir2) as the coefficients of ``(u^2 + v^2) / 2``,
+    ``(u^2 - v^2) / 2`` and ``uv`` of the height over the frame (t1, t2, normal), (3,)."""
+    a1 = dir1[0] * t10 + dir1[1] * t11 + dir1[2] * t12
+    b1 = dir1[0] * t20 + dir1[1] * t21 + dir1[2] * t22
+    a2 = dir2[0] * t10 + dir2[1] * t11 + dir2[2] * t12
+    b2 = dir2[0] * t20 + dir2[1] * t21 + dir2[2] * t22
+    n1 = np.hypot(a1, b1)
+    n2 = np.hypot(a2, b2)
+    out = np.zeros(3)
+    if not (n1 > 0.0 and n2 > 0.0):
+        return out
+    a1, b1, a2, b2 = a1 / n1, b1 / n1, a2 / n2, b2 / n2
+    s11 = k1 * a1 * a1 + k2 * a2 * a2
+    s22 = k1 * b1 * b1 + k2 * b2 * b2
+    s12 = k1 * a1 * b1 + k2 * a2 * b2
+    # height -1/2 [u v] S [u v]^T (bending away from the normal where positive)
+    out[0] = -0.5 * (s11 + s22)
+    out[1] = -0.5 * (s11 - s22)
+    out[2] = -s12
+    return out
+
+
+@njit(cache=True)
+def _rejection(mom, rhs, zz, g, rss_sphere, s2):
+    """How much worse than the sphere the estimate's terms ``g`` (3,) fit the points, with
+    the constant and the slopes fitted afresh: ``(RSS - rss_sphere) / s2``."""
+    yy = zz
+    for a in range(3):
+        yy -= 2.0 * g[a] * rhs[3 + a]
+        for b in range(3):
+            yy += g[a] * g[b] * mom[3 + a, 3 + b]
+    b3 = np.empty(3)
+    for i in range(3):
+        b3[i] = rhs[i]
+        for a in range(3):
+            b3[i] -= mom[i, 3 + a] * g[a]
+    x, ok = _solve(np.ascontiguousarray(mom[:3, :3]), b3)
+    if not ok:
+        return 0.0
+    rss = yy - (x[0] * b3[0] + x[1] * b3[1] + x[2] * b3[2])
+    return (rss - rss_sphere) / s2
+
+
+@njit(cache=True)
+def _ladder(points, normal, p, nbr, noise, sizes, fcrit, g, out_k, out_se, out_count,
+            out_reject):
+    """The sphere ladder at point ``p`` over its neighbors ``nbr`` (nearest first); fills
+    ``out_k``, ``out_se``, ``out_count`` and ``out_reject`` (s,) up to the first unusable
+    size (NaN after). ``g`` (3,): the estimate's terms (:func:`_current_terms`), whose
+    :func:`_rejection` at each usable size goes to ``out_reject``."""
+    t10, t11, t12, t20, t21, t22 = tangent_basis_xyz(normal[0], normal[1], normal[2])
+    m = nbr.shape[0]
+    # Lengths in units of the farthest neighbor's distance: the moments stay of order one.
+    far = 0.0
+    for c in range(m):
+        q = nbr[c]
+        d0 = points[q, 0] - points[p, 0]
+        d1 = points[q, 1] - points[p, 1]
+        d2 = points[q, 2] - points[p, 2]
+        far = max(far, d0 * d0 + d1 * d1 + d2 * d2)
+    unit = np.sqrt(far)
+    if not unit > 0.0:
+        return
+    noise_u = noise / unit
+    mom = np.zeros((6, 6))
+    rhs = np.zeros(6)
+    zz = 0.0
+    count = 0
+    row = np.empty(6)
+    coef = np.zeros(4)
+    pos = 0
+    for j in range(sizes.shape[0]):
+        end = min(sizes[j], m)
+        while pos < end:
+            q = nbr[pos]
+            pos += 1
+            d0 = (points[q, 0] - points[p, 0]) / unit
+            d1 = (points[q, 1] - points[p, 1]) / unit
+            d2 = (points[q, 2] - points[p, 2]) / unit
+            u = d0 * t10 + d1 * t11 + d2 * t12
+            v = d0 * t20 + d1 * t21 + d2 * t22
+            z = d0 * normal[0] + d1 * normal[1] + d2 * normal[2]
+            if j > 0:
+                pred = (coef[0] + coef[1] * u + coef[2] * v
+                        + 0.5 * coef[3] * (u * u + v * v + z * z))
+                if abs(z - pred) > TRIM * noise_u:
+                    continue
+            row[0], row[1], row[2] = 1.0, u, v
+            row[3] = 0.5 * (u * u + v * v + z * z)
+            row[4], row[5] = 0.5 * (u * u - v * v), u * v
+            for a in range(6):
+                rhs[a] += row[a] * z
+                for b in range(6):
+                    mom[a, b] += row[a] * row[b]
+            zz += z * z
+            count += 1
+        if count < max(MIN_SHARE * sizes[j], 12.0):
+            return
+        q = nbr[end - 1]
+        reach = np.sqrt((points[q, 0] - points[p, 0]) ** 2 + (points[q, 1] - points[p, 1]) ** 2
+                        + (points[q, 2] - points[p, 2]) ** 2) / unit
+        if reach < MIN_REACH * noise_u:
+            continue  # noise across the patch too: a larger size may do
+        cq, ok_q = _solve(mom, rhs)
+        # The sphere's design is the first four columns of the anisotropic one.
+        mu = np.ascontiguousarray(mom[:4, :4])
+        bu = rhs[:4].copy()
+        cu, ok_u = _solve(mu, bu)
+        if not (ok_q and ok_u):
+            return
+        rss_q = max(zz - (cq[0] * rhs[0] + cq[1] * rhs[1] + cq[2] * rhs[2] + cq[3] * rhs[3]
+                          + cq[4] * rhs[4] + cq[5] * rhs[5]), 0.0)
+        rss_u = max(zz - (cu[0] * bu[0] + cu[1] * bu[1] + cu[2] * bu[2] + cu[3] * bu[3]),
+                    rss_q)
+        s2 = rss_u / (count - 4)
+        if np.sqrt(s2) > RESIDUAL * noise_u:
+            return
+        if rss_q > 0.0 and 0.5 * (rss_u - rss_q) / (rss_q / (count - 6)) > fcrit[j]:
+            return
+        # The sphere (plane where c3 = 0) c3 |x|^2 / 2 + (c1, c2, -1) . x + c0 = 0: its
+        # curvature at any size, bending away from the normal where positive.
+        root = np.sqrt(max(1.0 + cu[1] * cu[1] + cu[2] * cu[2] - 2.0 * cu[3] * cu[0], 1e-12))
+        k = -cu[3] / root / unit
+        se = np.sqrt(s2 * _inverse_diag(mu, 3)) / root / unit
+        if not np.isfinite(se):
+            return
+        for i in range(j):
+            if abs(k - out_k[i]) > LEPSKI * out_se[i]:
+                return
+        out_k[j], out_se[j], out_count[j] = k, se, count
+        out_reject[j] = _rejection(mom, rhs, zz, g * unit, rss_u, s2)
+        for a in range(4):
+            coef[a] = cu[a]
+
+
+@njit(parallel=True, cache=True)
+def umbilic_fits(points, normals, dir1, dir2, query, nbr, noise, sizes, fcrit, k1, k2, std1,
+                 std2, used, out_k, out_se, out_count):
+    """Sphere fits where the points reject the kept estimate in their favour (module
+    docstring).
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+    normals, dir1, dir2 : ndarray, shape (n, 3)
+        The kept estimate's unit normals and principal directions; the query points' normals
+        give their frames.
+    query : ndarray, shape (m,), int64
+    nbr : ndarray, shape (m, K), int
+        Each query point's nearest neighbors, nearest first (outliers replaced by -1 are
+        skipped), ``K >= sizes[-1]`` or the cloud's size.
+    noise : float
+        The cloud's noise (length unit).
+    sizes : ndarray, shape (s,), int64
+    fcrit : ndarray, shape (s,)
+        :func:`f_critical` of ``sizes``.
+    k1, k2, std1, std2 : ndarray, shape (m,)
+        The kept estimate at the query points and its standard errors.
+    used : ndarray, shape (m,), int
+        Its neighbor count.
+    out_k, out_se : ndarray, shape (m,)
+        The sphere's curvature and its standard error where it replaces the estimate, NaN
+        elsewhere.
+    out_count : ndarray, shape (m,), int64
+        Its size (0 elsewhere): its neighbors, of which the trimming may have left some out.
+    """
+    s = sizes.shape[0]
+    for i in prange(query.shape[0]):
+        out_k[i] = np.nan
+        out_se[i] = np.nan
+        out_count[i] = 0
+        p = query[i]
+        row = nbr[i]
+        keep = np.empty(row.shape[0], np.int64)
+        m = 0
+        for c in range(row.shape[0]):
+            if row[c] >= 0:
+                keep[m] = row[c]
+                m += 1
+        n = normals[p]
+        t10, t11, t12, t20, t21, t22 = tangent_basis_xyz(n[0], n[1], n[2])
+        g = _current_terms(dir1[p], dir2[p], k1[i], k2[i], t10, t11, t12, t20, t21, t22)
+        ks = np.full(s, np.nan)
+        ses = np.full(s, np.nan)
+        counts = np.zeros(s, np.int64)
+        reject = np.full(s, np.nan)
+        _ladder(points, n, p, keep[:m], noise, sizes, fcrit, g, ks, ses, counts, reject)
+        best = np.inf
+        for j in range(s):
+            se = ses[j]
+            if not (np.isfinite(se) and reject[j] > REJECT
+                    and counts[j] >= SIZE_SHARE * used[i]):
+                continue
+            # a flat reading must beat the larger of the estimate's errors, a curved one both
+            flat = abs(ks[j]) <= AGREE * se
+            limit = max(std1[i], std2[i]) if flat else min(std1[i], std2[i])
+            if not (se < limit and se < best):
+                continue
+            if (abs(ks[j] - k1[i]) > AGREE * np.hypot(se, std1[i])
+                    or abs(ks[j] - k2[i]) > AGREE * np.hypot(se, std2[i])):
+                continue
+            best = se
+            out_k[i], out_se[i], out_count[i] = ks[j], se, sizes[j]
