@@ -50,7 +50,7 @@ from .linalg import cholesky, solve_lower, solve_upper_t
 from .quadric import tangent_basis_xyz
 
 __all__ = ["AGREE", "F_LEVEL", "LEPSKI", "MIN_REACH", "MIN_SHARE", "REJECT", "RESIDUAL",
-           "SIZES", "SIZE_SHARE", "TRIM", "f_critical", "umbilic_fits"]
+           "RESIDUAL_FLOOR", "SIZES", "SIZE_SHARE", "TRIM", "f_critical", "umbilic_fits"]
 
 #: List sizes of the ladder (nearest neighbors, the point itself included). 24 is left out:
 #: its fits are too noisy to beat a kept estimate over the 48 neighbors and more it may
@@ -62,6 +62,8 @@ TRIM = 8.0
 #: A usable size's sphere residual (RMS, per degree of freedom) is at most this many noise.
 #: The default's noise is its plan's cubic-fit residual, about 1.27 times the true noise.
 RESIDUAL = 1.2
+#: The residual variance divides the likelihood ratio: at least this share of the noise.
+RESIDUAL_FLOOR = 1e-3
 #: Level of the F test of k1 = k2.
 F_LEVEL = 0.05
 #: A size's curvature agrees with every smaller one's within this many of its standard error.
@@ -226,7 +228,8 @@ def _ladder(points, normal, p, nbr, noise, sizes, fcrit, g, out_k, out_se, out_c
                           + cq[4] * rhs[4] + cq[5] * rhs[5]), 0.0)
         rss_u = max(zz - (cu[0] * bu[0] + cu[1] * bu[1] + cu[2] * bu[2] + cu[3] * bu[3]),
                     rss_q)
-        s2 = rss_u / (count - 4)
+        # (floored: a patch without noise, in a cloud with some, still divides by it)
+        s2 = max(rss_u / (count - 4), (RESIDUAL_FLOOR * noise_u) ** 2)
         if np.sqrt(s2) > RESIDUAL * noise_u:
             return
         if rss_q > 0.0 and 0.5 * (rss_u - rss_q) / (rss_q / (count - 6)) > fcrit[j]:

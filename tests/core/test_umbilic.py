@@ -120,6 +120,22 @@ def test_the_points_reject_a_wrong_estimate_and_keep_a_right_one():
     assert seen >= 35 and rejected[0] <= 0.15 * seen and rejected[1] == seen
 
 
+def test_a_patch_without_noise_in_a_noisy_cloud_divides_by_no_zero():
+    # an exact plane read with a noise of 0.002 (its residual is 0): the ladder reads 0
+    # and raises nothing (a ZeroDivisionError reached the service as a 500 before the floor)
+    pts, normals, p = patch("plane", 0.0, 1)
+    ks, ses, counts = ladder(pts, normals, p, 0.002)
+    assert np.all(np.isfinite(ks)) and np.all(np.abs(ks) < 1e-9)
+    # a small sphere projected onto its surface (the service's tests' cloud) takes the
+    # noisy branch and reads 0.5 (mean error 0.0015; 0.016 before the sphere fits)
+    from curvature.synthetic import sphere
+
+    cloud = sphere(200, radius=2.0, seed=0)
+    res = curvature.estimate(cloud.points)
+    assert res.info["fit"] != "implicit"
+    assert np.nanmean(np.abs(res.k1 - 0.5)) < 0.005
+
+
 @pytest.fixture(scope="module")
 def box():
     cloud = synthetic.filleted_box(noise=0.1, seed=1)
