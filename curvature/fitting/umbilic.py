@@ -14,8 +14,8 @@ high by about ``h^2 / 4 R^2``: 0.4 at the filleted box's corners over 48 points.
 
 At each point, over its nearest neighbors in order, for each size of :data:`SIZES`:
 
-1. the points join the fit unless, past the first size, they lie more than :data:`TRIM`
-   noise off the previous size's sphere (the other face of a thin wall, an outlier);
+1. the points join the fit unless, once a size has been fitted, they lie more than
+   :data:`TRIM` noise off its sphere (the other face of a thin wall, an outlier);
 2. the sphere and the sphere with two more terms, ``(u^2 - v^2) / 2`` and ``uv`` (unequal
    principal curvatures), are fitted by least squares from one set of moments; the size is
    usable when its inliers are at least :data:`MIN_SHARE` of the size, the sphere's residual
@@ -184,6 +184,7 @@ def _ladder(points, normal, p, nbr, noise, sizes, fcrit, g, out_k, out_se, out_c
     count = 0
     row = np.empty(6)
     coef = np.zeros(4)
+    fitted = False  # whether coef holds a smaller size's sphere (the trimming's reference)
     pos = 0
     for j in range(sizes.shape[0]):
         end = min(sizes[j], m)
@@ -196,7 +197,7 @@ def _ladder(points, normal, p, nbr, noise, sizes, fcrit, g, out_k, out_se, out_c
             u = d0 * t10 + d1 * t11 + d2 * t12
             v = d0 * t20 + d1 * t21 + d2 * t22
             z = d0 * normal[0] + d1 * normal[1] + d2 * normal[2]
-            if j > 0:
+            if fitted:
                 pred = (coef[0] + coef[1] * u + coef[2] * v
                         + 0.5 * coef[3] * (u * u + v * v + z * z))
                 if abs(z - pred) > TRIM * noise_u:
@@ -248,6 +249,7 @@ def _ladder(points, normal, p, nbr, noise, sizes, fcrit, g, out_k, out_se, out_c
         out_reject[j] = _rejection(mom, rhs, zz, g * unit, rss_u, s2)
         for a in range(4):
             coef[a] = cu[a]
+        fitted = True
 
 
 @njit(parallel=True, cache=True)
