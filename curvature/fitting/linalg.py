@@ -221,6 +221,17 @@ def solve_lower(l, b):
 
 
 @njit(cache=True)
+def solve_spd(a, b, rel_tol):
+    """``a^-1 b`` for a symmetric positive definite ``a`` (m, m) and ``b`` (m,), and False
+    where ``a`` is numerically singular (:func:`cholesky`'s ``rel_tol``; ``b`` is returned
+    then, the solution being undefined)."""
+    low, ok = cholesky(a, rel_tol)
+    if not ok:
+        return b, False
+    return solve_upper_t(low, solve_lower(low, b)), True
+
+
+@njit(cache=True)
 def congruence_inverse(l, mat):
     """``L^-1 mat L^-T`` for lower-triangular ``l`` and symmetric ``mat``, both (m, m).
 

@@ -46,7 +46,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .linalg import cholesky, jacobi3, solve_lower, solve_upper_t
+from .linalg import cholesky, jacobi3, solve_lower, solve_spd
 
 __all__ = ["AGREEMENT", "AXIS_MIN", "BEYOND_MAX", "EDGE_FAN_K", "EDGE_FLAT", "EDGE_FLAT_NOISE",
            "EDGE_KEEP", "EDGE_LADDER", "EDGE_NORMAL_K", "FAN_MIN", "GAP_MAX", "MIN_INLIERS",
@@ -144,16 +144,6 @@ def worth_trying(flat: np.ndarray, radius: np.ndarray, noise: float) -> np.ndarr
 
 
 @njit(cache=True)
-def _solve_spd(a, b):
-    """``a^-1 b`` for a symmetric positive definite ``a``, and False where ``a`` is
-    numerically singular (the solution is then undefined)."""
-    low, ok = cholesky(a, RANK_TOL)
-    if not ok:
-        return b, False
-    return solve_upper_t(low, solve_lower(low, b)), True
-
-
-@njit(cache=True)
 def _kasa(u, v, w, out):
     """Weighted algebraic circle fit; ``out`` = (cu, cv, R). False where it fails."""
     a = np.zeros((3, 3))
@@ -167,7 +157,7 @@ def _kasa(u, v, w, out):
             b[r] += row[r] * rhs
             for c in range(3):
                 a[r, c] += row[r] * row[c]
-    x, ok = _solve_spd(a, b)
+    x, ok = solve_spd(a, b, RANK_TOL)
     if not ok:
         return False
     cu, cv = -0.5 * x[0], -0.5 * x[1]
@@ -208,7 +198,7 @@ def _geometric(u, v, w, out):
                     jtj[r, c] += row[r] * row[c]
         if it == _REFINE:
             break
-        step, ok = _solve_spd(jtj, -jtr)
+        step, ok = solve_spd(jtj, -jtr, RANK_TOL)
         if not ok:
             return np.nan
         out[0] += step[0]

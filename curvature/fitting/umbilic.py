@@ -46,12 +46,14 @@ import numpy as np
 from numba import njit, prange
 from scipy.stats import f as f_distribution
 
-from .linalg import cholesky, solve_lower, solve_upper_t
+from .linalg import solve_spd
 from .quadric import tangent_basis_xyz
 
 __all__ = ["AGREE", "F_LEVEL", "LEPSKI", "MIN_REACH", "MIN_SHARE", "REJECT", "RESIDUAL",
            "RESIDUAL_FLOOR", "SIZES", "SIZE_SHARE", "TRIM", "f_critical", "umbilic_fits"]
 
+# Relative pivot under which a fit's normal matrix counts as singular.
+RANK_TOL = 1e-12
 #: List sizes of the ladder (nearest neighbors, the point itself included). 24 is left out:
 #: its fits are too noisy to beat a kept estimate over the 48 neighbors and more it may
 #: replace.
@@ -95,20 +97,11 @@ def f_critical(sizes=SIZES, level: float = F_LEVEL) -> np.ndarray:
 
 
 @njit(cache=True)
-def _solve(a, b):
-    """``a x = b`` for symmetric positive definite ``a``; ok False where it is not."""
-    l, ok = cholesky(a, 1e-12)
-    if not ok:
-        return b, False
-    return solve_upper_t(l, solve_lower(l, b)), True
-
-
-@njit(cache=True)
 def _inverse_diag(a, j):
     """Entry (j, j) of ``a``'s inverse (``a`` symmetric positive definite), NaN where singular."""
     e = np.zeros(a.shape[0])
     e[j] = 1.0
-    x, ok = _solve(a, e)
+    x, ok = solve_spd(a, e, RANK_TOL)
     return x[j] if ok else np.nan
 
 
@@ -150,7 +143,7 @@ def _rejection(mom, rhs, zz, g, rss_sphere, s2):
         b3[i] = rhs[i]
         for a in range(3):
             b3[i] -= mom[i, 3 + a] * g[a]
-    x, ok = _solve(np.ascontiguousarray(mom[:3, :3]), b3)
+    x, ok = solve_spd(np.ascontiguousarray(mom[:3, :3]), b3, RANK_TOL)
     if not ok:
         return 0.0
     rss = yy - (x[0] * b3[0] + x[1] * b3[1] + x[2] * b3[2])
@@ -218,11 +211,11 @@ def _ladder(points, normal, p, nbr, noise, sizes, fcrit, g, out_k, out_se, out_c
                         + (points[q, 2] - points[p, 2]) ** 2) / unit
         if reach < MIN_REACH * noise_u:
             continue  # noise across the patch too: a larger size may do
-        cq, ok_q = _solve(mom, rhs)
+        cq, ok_q = solve_spd(mom, rhs, RANK_TOL)
         # The sphere's design is the first four columns of the anisotropic one.
         mu = np.ascontiguousarray(mom[:4, :4])
         bu = rhs[:4].copy()
-        cu, ok_u = _solve(mu, bu)
+        cu, ok_u = solve_spd(mu, bu, RANK_TOL)
         if not (ok_q and ok_u):
             return
         rss_q = max(zz - (cq[0] * rhs[0] + cq[1] * rhs[1] + cq[2] * rhs[2] + cq[3] * rhs[3]
