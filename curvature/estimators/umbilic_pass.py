@@ -18,14 +18,20 @@ from ..fitting.umbilic import SIZES, f_critical, umbilic_fits
 from ..status import Status
 from ..uncertainty import with_floor
 
-__all__ = ["TRIED_SHARE", "candidates", "umbilic_pass"]
+__all__ = ["SHORT_SIZES", "TRIED_SHARE", "candidates", "umbilic_pass"]
 
 
 #: Only estimates kept over at most this many times the largest sphere's neighbors are tried:
-#: a fit over 768 points and more (the default's on smooth surfaces) already reads far more
-#: precisely than a sphere over 192, and trying every point would cost a 192-neighbor query
+#: a fit over 1152 points (the default's widest on smooth surfaces) already reads far more
+#: precisely than a sphere over 384, and trying every point would cost a 384-neighbor query
 #: each.
 TRIED_SHARE = 2
+#: The sizes (48, 96 and 192: a 192-neighbor list) an estimate kept over at most TRIED_SHARE
+#: times the last of them is tried with; only the wider ones are tried with 384 too. With
+#: 384 everywhere the bench's blade read its sides 5 % better (seeds 1 to 4), but the
+#: 20,000-point blade took 1.23 times as long, a 96,000-point box 1.44 times, PCL's table
+#: scan 1.15 times (this way 1.13, 1.29 and 1.02 times; docs/accuracy.md section 9, step 28).
+SHORT_SIZES = 3
 
 
 def candidates(res, rows: np.ndarray, largest: int) -> np.ndarray:
@@ -78,32 +84,51 @@ def umbilic_pass(points, query_nearest, res, rows, noise: float, largest: int,
     query_rows = candidates(res, rows, int(sizes[-1]))
     if grow is not None:
         grow(query_rows.shape[0])
-    fcrit = f_critical(sizes)
-    k = int(sizes[-1])
+    # A size replaces an estimate only where it spans half its neighbors (SIZE_SHARE): the
+    # estimates kept over at most TRIED_SHARE times the last short size are tried over the
+    # short ladder (a shorter list), only the wider ones over every size.
+    short = sizes[:SHORT_SIZES]
+    wide = res.neighbor_count[query_rows] > TRIED_SHARE * short[-1]
     replaced = 0
-    for start in range(0, query_rows.shape[0], chunk):
-        query = query_rows[start:start + chunk]
-        nbr, d2 = query_nearest(query, k)
-        nbr = np.where(outliers[nbr], -1, nbr)
-        m = query.shape[0]
-        out_k, out_se = np.empty(m), np.empty(m)
-        out_count = np.empty(m, np.int64)
-        umbilic_fits(points, res.normals, res.dir1, res.dir2, query, nbr, noise, sizes, fcrit,
-                     res.k1[query], res.k2[query], res.k1_std[query], res.k2_std[query],
-                     res.neighbor_count[query].astype(np.int64), out_k, out_se, out_count)
-        if reach is not None:
-            reach[query] = np.fmax(reach[query], np.sqrt(d2[:, -1]))
-        ok = np.isfinite(out_k)
-        at = query[ok]
-        kk = out_k[ok]
-        std = with_floor(out_se[ok], kk, kk, floor_scale)
-        res.k1[at] = kk
-        res.k2[at] = kk
-        res.k1_std[at] = std
-        res.k2_std[at] = std
-        res.mean_std[at] = std
-        res.neighbor_count[at] = out_count[ok]
-        replaced += at.shape[0]
-        if tick is not None:
-            tick(m)
+    for group, ladder in ((query_rows[~wide], short), (query_rows[wide], sizes)):
+        for start in range(0, group.shape[0], chunk):
+            query = group[start:start + chunk]
+            fits = _fits(points, query_nearest, res, query, noise, ladder, outliers, reach)
+            replaced += _store(res, query, fits, floor_scale)
+            if tick is not None:
+                tick(query.shape[0])
     return replaced
+
+
+def _fits(points, query_nearest, res, query, noise, sizes, outliers, reach) -> np.ndarray:
+    """:func:`~curvature.fitting.umbilic.umbilic_fits` at ``query`` over the ladder
+    ``sizes``: (curvature, standard error, size) per point, shape (m, 3), NaN where the
+    estimate stays."""
+    nbr, d2 = query_nearest(query, int(sizes[-1]))
+    nbr = np.where(outliers[nbr], -1, nbr)
+    m = query.shape[0]
+    out_k, out_se = np.empty(m), np.empty(m)
+    out_count = np.empty(m, np.int64)
+    umbilic_fits(points, res.normals, res.dir1, res.dir2, query, nbr, noise, sizes,
+                 f_critical(sizes), res.k1[query], res.k2[query], res.k1_std[query],
+                 res.k2_std[query], res.neighbor_count[query].astype(np.int64), out_k, out_se,
+                 out_count)
+    if reach is not None:
+        reach[query] = np.fmax(reach[query], np.sqrt(d2[:, -1]))
+    return np.column_stack([out_k, out_se, out_count])
+
+
+def _store(res, query, fits, floor_scale) -> int:
+    """The sphere fits ``fits`` (:func:`_fits`) into ``res`` where they replace the estimate;
+    how many do."""
+    ok = np.isfinite(fits[:, 0])
+    at = query[ok]
+    kk = fits[ok, 0]
+    std = with_floor(fits[ok, 1], kk, kk, floor_scale)
+    res.k1[at] = kk
+    res.k2[at] = kk
+    res.k1_std[at] = std
+    res.k2_std[at] = std
+    res.mean_std[at] = std
+    res.neighbor_count[at] = fits[ok, 2].astype(np.int64)
+    return int(at.shape[0])

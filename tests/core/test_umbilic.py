@@ -99,12 +99,14 @@ def test_the_points_reject_a_wrong_estimate_and_keep_a_right_one():
     # a sphere cap (k = 0.5) read right (k1 = k2 = 0.5) and with a bias (0.8 / 0.2, the
     # kind a fit reaching onto a fillet shows): the likelihood ratio against the sphere at
     # its largest usable size is chi-square with one degree of freedom for the right one
-    # (over 4 at 5 % of the seeds, measured 5 %) and rejects the wrong one everywhere
+    # (over 4 at 4.6 % of draws; measured over 200 seeds at each size: 2.6 / 3.3 / 2.9 /
+    # 3.8 %) and rejects the wrong one almost everywhere (92 of 93 seeds: where only the
+    # 48-point size is usable its power falls short now and then)
     from curvature.fitting.quadric import tangent_basis_xyz
 
     frame = tangent_basis_xyz(0.0, 0.0, 1.0)
     rejected, seen = np.zeros(2), 0
-    for seed in range(1, 41):
+    for seed in range(1, 101):
         pts, normals, p = patch("sphere", 0.002, seed)
         _, nbr = cKDTree(pts).query(pts[p], SIZES[-1])
         for c, (k1, k2) in enumerate(((0.5, 0.5), (0.8, 0.2))):
@@ -117,7 +119,7 @@ def test_the_points_reject_a_wrong_estimate_and_keep_a_right_one():
             if usable.size:  # (a size-48 F test fails at about 5 % of the caps)
                 rejected[c] += usable[-1] > umbilic.REJECT
                 seen += c
-    assert seen >= 35 and rejected[0] <= 0.15 * seen and rejected[1] == seen
+    assert seen >= 85 and rejected[0] <= 0.1 * seen and rejected[1] >= 0.97 * seen
 
 
 def test_a_patch_without_noise_in_a_noisy_cloud_divides_by_no_zero():
@@ -194,3 +196,22 @@ def test_the_box_is_tile_exact_with_its_umbilic_fits(box):
     assert tiled.info["tiles"] == 4
     for name, arr in res.fields().items():
         np.testing.assert_array_equal(tiled.fields()[name], arr, err_msg=name)
+
+
+def test_a_denser_box_reads_its_faces_and_corners_better_with_the_384_size(monkeypatch):
+    # 96,000 points at 0.05 % noise: the scale selection keeps 768-point fits beside the
+    # fillets there, which only the 384-point sphere spans half of (SIZE_SHARE). Regions of
+    # the 12,000-point box's width (edge zone 2 spacings there), seed 1, mean of the larger
+    # error: faces 0.096 -> 0.087, corners 0.281 -> 0.227, fillets unchanged (0.206)
+    from curvature.estimators import umbilic_pass
+    from curvature.synthetic.parts import EDGE_ZONE
+
+    cloud = synthetic.filleted_box(96_000, noise=0.05, seed=1,
+                                   edge_zone=EDGE_ZONE * np.sqrt(8.0))
+    res = curvature.estimate(cloud.points, normals=cloud.normals)
+    monkeypatch.setattr(umbilic_pass, "SIZES", umbilic.SIZES[:3])
+    without = curvature.estimate(cloud.points, normals=cloud.normals)
+    assert worst(cloud, res, "face") < 0.95 * worst(cloud, without, "face")
+    assert worst(cloud, res, "corner") < 0.9 * worst(cloud, without, "corner")
+    assert worst(cloud, res, "fillet") <= 1.01 * worst(cloud, without, "fillet")
+    assert np.isin(384, res.neighbor_count[cloud.region_mask("face")])
