@@ -91,44 +91,40 @@ def umbilic_pass(points, query_nearest, res, rows, noise: float, largest: int,
     wide = res.neighbor_count[query_rows] > TRIED_SHARE * short[-1]
     replaced = 0
     for group, ladder in ((query_rows[~wide], short), (query_rows[wide], sizes)):
+        fcrit = f_critical(ladder)
         for start in range(0, group.shape[0], chunk):
             query = group[start:start + chunk]
-            fits = _fits(points, query_nearest, res, query, noise, ladder, outliers, reach)
-            replaced += _store(res, query, fits, floor_scale)
+            out_k, out_se, out_count = _fits(points, query_nearest, res, query, noise, ladder,
+                                             fcrit, outliers, reach)
+            ok = np.isfinite(out_k)
+            at = query[ok]
+            kk = out_k[ok]
+            std = with_floor(out_se[ok], kk, kk, floor_scale)
+            res.k1[at] = kk
+            res.k2[at] = kk
+            res.k1_std[at] = std
+            res.k2_std[at] = std
+            res.mean_std[at] = std
+            res.neighbor_count[at] = out_count[ok]
+            replaced += at.shape[0]
             if tick is not None:
                 tick(query.shape[0])
     return replaced
 
 
-def _fits(points, query_nearest, res, query, noise, sizes, outliers, reach) -> np.ndarray:
+def _fits(points, query_nearest, res, query, noise, sizes, fcrit, outliers, reach):
     """:func:`~curvature.fitting.umbilic.umbilic_fits` at ``query`` over the ladder
-    ``sizes``: (curvature, standard error, size) per point, shape (m, 3), NaN where the
-    estimate stays."""
+    ``sizes`` (``fcrit``: its :func:`~curvature.fitting.umbilic.f_critical`): the sphere's
+    curvature, standard error and size per point, shapes (m,), NaN (0) where the estimate
+    stays."""
     nbr, d2 = query_nearest(query, int(sizes[-1]))
     nbr = np.where(outliers[nbr], -1, nbr)
     m = query.shape[0]
     out_k, out_se = np.empty(m), np.empty(m)
     out_count = np.empty(m, np.int64)
-    umbilic_fits(points, res.normals, res.dir1, res.dir2, query, nbr, noise, sizes,
-                 f_critical(sizes), res.k1[query], res.k2[query], res.k1_std[query],
-                 res.k2_std[query], res.neighbor_count[query].astype(np.int64), out_k, out_se,
-                 out_count)
+    umbilic_fits(points, res.normals, res.dir1, res.dir2, query, nbr, noise, sizes, fcrit,
+                 res.k1[query], res.k2[query], res.k1_std[query], res.k2_std[query],
+                 res.neighbor_count[query].astype(np.int64), out_k, out_se, out_count)
     if reach is not None:
         reach[query] = np.fmax(reach[query], np.sqrt(d2[:, -1]))
-    return np.column_stack([out_k, out_se, out_count])
-
-
-def _store(res, query, fits, floor_scale) -> int:
-    """The sphere fits ``fits`` (:func:`_fits`) into ``res`` where they replace the estimate;
-    how many do."""
-    ok = np.isfinite(fits[:, 0])
-    at = query[ok]
-    kk = fits[ok, 0]
-    std = with_floor(fits[ok, 1], kk, kk, floor_scale)
-    res.k1[at] = kk
-    res.k2[at] = kk
-    res.k1_std[at] = std
-    res.k2_std[at] = std
-    res.mean_std[at] = std
-    res.neighbor_count[at] = fits[ok, 2].astype(np.int64)
-    return int(at.shape[0])
+    return out_k, out_se, out_count
