@@ -5,8 +5,9 @@ selection keeps small quadric fits there (their wider fits reach onto the featur
 those read three curvature terms from few points. A sphere fit of one curvature term
 (:mod:`curvature.fitting.umbilic`) over as many points reads such a point better. Its tests
 (an F test of k1 = k2, its residual against the noise, Lepski's rule over its sizes, a
-likelihood-ratio test of the kept estimate against it on the same points, agreement with
-the kept estimate) leave every other point as it was. Not run on dense clouds (their
+likelihood-ratio test of the kept estimate against it on the same points where that
+estimate is wider than a small rung, a standard error below the estimate's) leave every
+other point as it was. Not run on dense clouds (their
 thinned share's fits are read at every point) nor on clean ones (exact implicit fits).
 """
 
@@ -84,9 +85,9 @@ def umbilic_pass(points, query_nearest, res, rows, noise: float, largest: int,
     query_rows = candidates(res, rows, int(sizes[-1]))
     if grow is not None:
         grow(query_rows.shape[0])
-    # A size replaces an estimate only where it spans half its neighbors (SIZE_SHARE): the
-    # estimates kept over at most TRIED_SHARE times the last short size are tried over the
-    # short ladder (a shorter list), only the wider ones over every size.
+    # The estimates kept over at most TRIED_SHARE times the last short size are tried over
+    # the short ladder (a shorter list), only the wider ones over every size: a 384-point
+    # sphere costs a 384-neighbor query (docs/accuracy.md, section 9, step 28).
     short = sizes[:SHORT_SIZES]
     wide = res.neighbor_count[query_rows] > TRIED_SHARE * short[-1]
     replaced = 0
