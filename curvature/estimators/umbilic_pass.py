@@ -19,20 +19,26 @@ from ..fitting.umbilic import SIZES, f_critical, umbilic_fits
 from ..status import Status
 from ..uncertainty import with_floor
 
-__all__ = ["SHORT_SIZES", "TRIED_SHARE", "candidates", "umbilic_pass"]
+__all__ = ["SHORT_SHARE", "SHORT_SIZES", "TRIED_SHARE", "candidates", "umbilic_pass"]
 
 
 #: Only estimates kept over at most this many times the largest sphere's neighbors are tried:
-#: a fit over 1152 points (the default's widest on smooth surfaces) already reads far more
-#: precisely than a sphere over 384, and trying every point would cost a 384-neighbor query
-#: each.
-TRIED_SHARE = 2
-#: The sizes (48, 96 and 192: a 192-neighbor list) an estimate kept over at most TRIED_SHARE
+#: 1152, the widest fit on clouds quieter than ``wide_noise`` (``QUIET_K`` of
+#: :mod:`~curvature.estimators.auto`); wider fits, on noisier clouds, already read far more
+#: precisely than a sphere over 384. Until stop 52 it was 2: a 96,000-point filleted box at
+#: 0.05 % noise kept 1152-point fits on its faces beside the fillets, biased by them more
+#: than their standard error (0.014) shows; the 384-point spheres there, usable at 254 of
+#: 400 sampled points, erred 0.026 against those fits' 0.068 (faces over regions of fixed
+#: width 0.083 -> 0.067, in 1.15 to 1.25 times the time; docs/accuracy.md section 9,
+#: step 30). Noisier clouds never keep 1152 (their ladder goes 768, 1536).
+TRIED_SHARE = 3
+#: The sizes (48, 96 and 192: a 192-neighbor list) an estimate kept over at most SHORT_SHARE
 #: times the last of them is tried with; only the wider ones are tried with 384 too. With
 #: 384 everywhere the bench's blade read its sides 5 % better (seeds 1 to 4), but the
 #: 20,000-point blade took 1.23 times as long, a 96,000-point box 1.44 times, PCL's table
 #: scan 1.15 times (this way 1.13, 1.29 and 1.02 times; docs/accuracy.md section 9, step 28).
 SHORT_SIZES = 3
+SHORT_SHARE = 2
 
 
 def candidates(res, rows: np.ndarray, largest: int) -> np.ndarray:
@@ -85,11 +91,11 @@ def umbilic_pass(points, query_nearest, res, rows, noise: float, largest: int,
     query_rows = candidates(res, rows, int(sizes[-1]))
     if grow is not None:
         grow(query_rows.shape[0])
-    # The estimates kept over at most TRIED_SHARE times the last short size are tried over
+    # The estimates kept over at most SHORT_SHARE times the last short size are tried over
     # the short ladder (a shorter list), only the wider ones over every size: a 384-point
     # sphere costs a 384-neighbor query (docs/accuracy.md, section 9, step 28).
     short = sizes[:SHORT_SIZES]
-    wide = res.neighbor_count[query_rows] > TRIED_SHARE * short[-1]
+    wide = res.neighbor_count[query_rows] > SHORT_SHARE * short[-1]
     replaced = 0
     for group, ladder in ((query_rows[~wide], short), (query_rows[wide], sizes)):
         fcrit = f_critical(ladder)

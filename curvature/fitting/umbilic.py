@@ -33,9 +33,12 @@ At each point, over its nearest neighbors in order, for each size of :data:`SIZE
    neighbors needs no rejection: it was fitted to about the sphere's own points, which
    never reject their own least-squares fit, and there the F test and the standard errors
    below decide (the sphere reads one curvature term from the points where the quadric
-   read three). The size must also span :data:`SIZE_SHARE` of the estimate's neighbors and
-   have a standard error below the larger of the estimate's two (a flat reading, within
-   :data:`FLAT` of its error of zero) or below both (a curved one). Of those sizes, the one
+   read three). The size must also span :data:`SIZE_SHARE` of the estimate's neighbors
+   (:data:`FAR_SHARE` where the points reject the estimate by more than :data:`REJECT_FAR`
+   times the sphere's residual variance) and have a standard error below the larger of the
+   estimate's two (a flat reading, within :data:`FLAT` of its error of zero) or below both
+   (a curved one), unless the points reject it by more than :data:`REJECT_FAR` and it was
+   kept over at least :data:`WIDE_KEPT` times the size's neighbors. Of those sizes, the one
    with the smallest standard error. (Its agreement with the estimate within their
    standard errors is not asked: where the points reject the estimate they have found it
    off, by more than the standard errors of a biased fit say.)
@@ -54,9 +57,9 @@ from scipy.stats import f as f_distribution
 from .linalg import solve_spd
 from .quadric import tangent_basis_xyz
 
-__all__ = ["F_LEVEL", "FLAT", "LEPSKI", "MIN_REACH", "MIN_SHARE", "REJECT", "RESIDUAL",
-           "RESIDUAL_FLOOR", "SIZES", "SIZE_SHARE", "SMALL_KEPT", "TRIM", "f_critical",
-           "umbilic_fits"]
+__all__ = ["F_LEVEL", "FAR_SHARE", "FLAT", "LEPSKI", "MIN_REACH", "MIN_SHARE", "REJECT",
+           "REJECT_FAR", "RESIDUAL", "RESIDUAL_FLOOR", "SIZES", "SIZE_SHARE", "SMALL_KEPT",
+           "TRIM", "WIDE_KEPT", "f_critical", "umbilic_fits"]
 
 # Relative pivot under which a fit's normal matrix counts as singular.
 RANK_TOL = 1e-12
@@ -112,6 +115,27 @@ FLAT = 2.0
 #: regions of fixed width 0.221 -> 0.168, faces 0.085 -> 0.083; the smooth grid's sphere and
 #: Bezier cells +0.5 to +2.3 % in 5 of 72; docs/accuracy.md, section 9, step 29).
 SIZE_SHARE = 0.25
+#: ... or at least this share where the points reject the estimate by more than
+#: :data:`REJECT_FAR` times the sphere's residual variance (4 of the sphere's standard
+#: errors): a 192-point sphere may then replace a 1152-point fit. Added at stop 52: on a
+#: 96,000-point filleted box at 0.05 % noise the faces beside the fillets keep 1152-point
+#: fits that reach onto the fillet; of 300 sampled, 137 had no usable 384-point sphere (it
+#: reaches the fillet too), while 78 of them had a usable 192-point one, erring 0.073
+#: against the kept fits' 0.366 (faces over regions of fixed width 0.067 -> 0.060; with
+#: no rejection asked beyond REJECT, 0.056, but the smooth grid's Bezier patch at 0.1 %
+#: noise, which keeps 1152-point fits too, read 1.3 to 2.0 % worse; docs/accuracy.md
+#: section 9, step 30).
+FAR_SHARE = 0.16
+REJECT_FAR = 16.0
+#: Where the points reject it that strongly (:data:`REJECT_FAR`), an estimate kept over at
+#: least this many times the sphere's neighbors need not have the larger standard error
+#: either: over more points it has the smaller one by design, and the rejection shows the
+#: bias that one leaves out. (The same 96,000-point box: of 300 sampled face points that
+#: kept 768-point fits, 45 had a sphere the points preferred that the standard errors
+#: turned down, erring 0.048 against the kept fits' 0.101; faces 0.060 -> 0.056. Over
+#: smaller kept fits such spheres erred more than the estimates: 1.20 against 0.29 over
+#: 192 points, 0.40 against 0.12 over 384.)
+WIDE_KEPT = 2
 #: Inliers of a usable size, at least this share of its size.
 MIN_SHARE = 0.5
 #: A size is used only where its list reaches this many noise from the point: the noise of
@@ -332,11 +356,14 @@ def umbilic_fits(points, normals, dir1, dir2, query, nbr, noise, sizes, fcrit, k
         for j in range(s):
             se = ses[j]
             if not (np.isfinite(se) and (reject[j] > REJECT or used[i] <= SMALL_KEPT)
-                    and counts[j] >= SIZE_SHARE * used[i]):
+                    and (counts[j] >= SIZE_SHARE * used[i]
+                         or (counts[j] >= FAR_SHARE * used[i] and reject[j] > REJECT_FAR))):
                 continue
             # a flat reading must beat the larger of the estimate's errors, a curved one both
             flat = abs(ks[j]) <= FLAT * se
             limit = max(std1[i], std2[i]) if flat else min(std1[i], std2[i])
+            if used[i] >= WIDE_KEPT * sizes[j] and reject[j] > REJECT_FAR:
+                limit = np.inf
             if not (se < limit and se < best):
                 continue
             best = se
