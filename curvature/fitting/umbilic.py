@@ -355,14 +355,15 @@ def umbilic_fits(points, normals, dir1, dir2, query, nbr, noise, sizes, fcrit, k
         best = np.inf
         for j in range(s):
             se = ses[j]
+            strong = reject[j] > REJECT_FAR
+            share = FAR_SHARE if strong else SIZE_SHARE
             if not (np.isfinite(se) and (reject[j] > REJECT or used[i] <= SMALL_KEPT)
-                    and (counts[j] >= SIZE_SHARE * used[i]
-                         or (counts[j] >= FAR_SHARE * used[i] and reject[j] > REJECT_FAR))):
+                    and counts[j] >= share * used[i]):
                 continue
             # a flat reading must beat the larger of the estimate's errors, a curved one both
             flat = abs(ks[j]) <= FLAT * se
             limit = max(std1[i], std2[i]) if flat else min(std1[i], std2[i])
-            if used[i] >= WIDE_KEPT * sizes[j] and reject[j] > REJECT_FAR:
+            if strong and used[i] >= WIDE_KEPT * sizes[j]:
                 limit = np.inf
             if not (se < limit and se < best):
                 continue
