@@ -771,6 +771,9 @@ class AutoRun:
         self.shift_rows = np.empty(0, np.int64)
         self.shifts = np.empty((0, 3))
         self.edge_candidates = np.empty(0, np.int64)  # points tried for a rounded edge
+        # Points a circle across a rounded thin edge read (:meth:`_store_rounded_edges`): no
+        # cylinder fit replaces them (it would span the edge's two sides)
+        self.edge_read = np.zeros(points.shape[0], bool)
         # The share of the hash (:func:`thinned_points`) these points are, of the cloud they
         # were thinned from (1: none); a coarser share of them must thin further below it.
         self.hash_share = 1.0
@@ -1105,9 +1108,10 @@ class AutoRun:
         self._umbilic(res, rows, kc)
 
     def _umbilic(self, res, rows, kc) -> None:
-        """Sphere fits at ``rows`` where they read a point better than its estimate
-        (:mod:`~curvature.estimators.umbilic_pass`; flat faces and sphere-like corners beside
-        features), over at most ``kc`` neighbors (docs/accuracy.md section 9, step 27)."""
+        """Sphere and cylinder fits at ``rows`` where they read a point better than its
+        estimate (:mod:`~curvature.estimators.umbilic_pass`; flat faces and sphere-like
+        corners beside features, fillets), over at most ``kc`` neighbors (docs/accuracy.md
+        section 9, steps 27 and 31)."""
         t0 = time.perf_counter()
 
         def nearest(idx, k):
@@ -1116,7 +1120,8 @@ class AutoRun:
 
         umbilic_pass(self.points, nearest, res, rows, self._noise(), kc, self.outliers,
                      self.chunk_size, self.reach if self.track_reach else None,
-                     1.0 / self.plan.spacing, self._grow_total, self._tick)
+                     1.0 / self.plan.spacing, self._grow_total, self._tick,
+                     cylinders=~self.edge_read)
         self.tree = None
         self.timings["umbilic"] = time.perf_counter() - t0
 
@@ -1437,6 +1442,7 @@ class AutoRun:
     def _store_rounded_edges(self, res, edges, rows) -> None:
         """Write the reads of :meth:`_rounded_edges` at the points of ``rows`` into ``res``."""
         keep = np.isin(edges[0], rows)
+        self.edge_read[edges[0][keep]] = True
         r, k1, k2, normals, dir1, dir2, s1, s2, count, reach = (x[keep] for x in edges)
         # The anchored fit stays where it agrees with the circle (its curvatures turned to the
         # circle's normal): a leading edge of 2.6 spacings, which the long ridge rung reads.

@@ -1,4 +1,5 @@
-"""The default's last pass on noisy clouds: sphere fits where they read a point better.
+"""The default's last pass on noisy clouds: sphere and cylinder fits where they read a point
+better.
 
 Flat faces and sphere-like corners bend alike in every direction; beside a feature the scale
 selection keeps small quadric fits there (their wider fits reach onto the feature), and
@@ -7,7 +8,10 @@ those read three curvature terms from few points. A sphere fit of one curvature 
 (an F test of k1 = k2, its residual against the noise, Lepski's rule over its sizes, a
 likelihood-ratio test of the kept estimate against it on the same points where that
 estimate is wider than a small rung, a standard error below the estimate's) leave every
-other point as it was. Not run on dense clouds (their
+other point as it was. Where no sphere does, a cylinder across the estimate's more curved
+direction may (a fillet, a cylinder's side, where a wide quadric reads the circle's quartic
+term as curvature), only where the points reject the estimate strongly; not at the points
+the circles across rounded thin edges read (``cylinders``). Not run on dense clouds (their
 thinned share's fits are read at every point) nor on clean ones (exact implicit fits).
 """
 
@@ -15,11 +19,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..fitting.umbilic import SIZES, f_critical, umbilic_fits
+from ..fitting.umbilic import CYLINDER_EXTRAS, SIZES, f_critical, umbilic_fits
 from ..status import Status
 from ..uncertainty import with_floor
 
-__all__ = ["SHORT_SHARE", "SHORT_SIZES", "TRIED_SHARE", "candidates", "umbilic_pass"]
+__all__ = ["CYLINDERS", "SHORT_SHARE", "SHORT_SIZES", "TRIED_SHARE", "candidates", "umbilic_pass"]
 
 
 #: Only estimates kept over at most this many times the largest sphere's neighbors are tried:
@@ -39,6 +43,9 @@ TRIED_SHARE = 3
 #: scan 1.15 times (this way 1.13, 1.29 and 1.02 times; docs/accuracy.md section 9, step 28).
 SHORT_SIZES = 3
 SHORT_SHARE = 2
+#: Whether cylinder fits may replace estimates where no sphere does (added at stop 53;
+#: docs/accuracy.md section 9, step 31).
+CYLINDERS = True
 
 
 def candidates(res, rows: np.ndarray, largest: int) -> np.ndarray:
@@ -50,8 +57,9 @@ def candidates(res, rows: np.ndarray, largest: int) -> np.ndarray:
 
 def umbilic_pass(points, query_nearest, res, rows, noise: float, largest: int,
                  outliers: np.ndarray, chunk: int, reach=None, floor_scale=0.0, grow=None,
-                 tick=None):
-    """Replace the estimates of ``rows`` where a sphere fit reads them better, in place.
+                 tick=None, cylinders=None):
+    """Replace the estimates of ``rows`` where a sphere or cylinder fit reads them better, in
+    place.
 
     Parameters
     ----------
@@ -78,6 +86,9 @@ def umbilic_pass(points, query_nearest, res, rows, noise: float, largest: int,
         1 / spacing: the rounding floor of the standard errors (:func:`with_floor`).
     grow, tick : callable, optional
         Progress: ``grow(m)`` announces the m points to be fitted, ``tick(m)`` reports m done.
+    cylinders : ndarray, shape (n,), bool, optional
+        Where cylinder fits may be tried (everywhere by default, nowhere where
+        :data:`CYLINDERS` is false).
 
     Returns
     -------
@@ -97,41 +108,58 @@ def umbilic_pass(points, query_nearest, res, rows, noise: float, largest: int,
     short = sizes[:SHORT_SIZES]
     wide = res.neighbor_count[query_rows] > SHORT_SHARE * short[-1]
     replaced = 0
+    if cylinders is None or not CYLINDERS:
+        cylinders = np.full(n, CYLINDERS)
     for group, ladder in ((query_rows[~wide], short), (query_rows[wide], sizes)):
-        fcrit = f_critical(ladder)
+        fcrit = (f_critical(ladder), f_critical(ladder, extras=CYLINDER_EXTRAS))
         for start in range(0, group.shape[0], chunk):
             query = group[start:start + chunk]
-            out_k, out_se, out_count = _fits(points, query_nearest, res, query, noise, ladder,
-                                             fcrit, outliers, reach)
-            ok = np.isfinite(out_k)
-            at = query[ok]
-            kk = out_k[ok]
-            std = with_floor(out_se[ok], kk, kk, floor_scale)
-            res.k1[at] = kk
-            res.k2[at] = kk
-            res.k1_std[at] = std
-            res.k2_std[at] = std
-            res.mean_std[at] = std
-            res.neighbor_count[at] = out_count[ok]
-            replaced += at.shape[0]
+            out = _fits(points, query_nearest, res, query, noise, ladder, fcrit, outliers,
+                        reach, cylinders)
+            ok = np.isfinite(out[0])
+            _store(res, query[ok], *(x[ok] for x in out), floor_scale)
+            replaced += int(ok.sum())
             if tick is not None:
                 tick(query.shape[0])
     return replaced
 
 
-def _fits(points, query_nearest, res, query, noise, sizes, fcrit, outliers, reach):
+def _store(res, at, k, se, count, kind, floor_scale) -> None:
+    """Write the fits that replace the estimates at ``at`` (shape (r,); the other arrays as
+    :func:`_fits` returns them there) into ``res``: a sphere's k as k1 and k2, a cylinder's
+    across its axis and 0 along it, ordered k1 >= k2 (the estimate's directions stay,
+    swapped where the order asks it, (d1, d2) -> (d2, -d1) to keep their handedness)."""
+    cylinder = kind > 0
+    k1 = np.where(cylinder, np.maximum(k, 0.0), k)
+    k2 = np.where(cylinder, np.minimum(k, 0.0), k)
+    swap = cylinder & ((kind == 2) == (k >= 0.0))
+    d1, d2 = res.dir1[at], res.dir2[at]
+    res.dir1[at] = np.where(swap[:, None], d2, d1)
+    res.dir2[at] = np.where(swap[:, None], -d1, d2)
+    std = with_floor(se, k1, k2, floor_scale)
+    res.k1[at], res.k2[at] = k1, k2
+    res.k1_std[at] = std
+    res.k2_std[at] = std
+    # H = k / 2 on a cylinder
+    res.mean_std[at] = np.where(cylinder, 0.5 * std, std)
+    res.neighbor_count[at] = count
+
+
+def _fits(points, query_nearest, res, query, noise, sizes, fcrit, outliers, reach, cylinders):
     """:func:`~curvature.fitting.umbilic.umbilic_fits` at ``query`` over the ladder
-    ``sizes`` (``fcrit``: its :func:`~curvature.fitting.umbilic.f_critical`): the sphere's
-    curvature, standard error and size per point, shapes (m,), NaN (0) where the estimate
-    stays."""
+    ``sizes`` (``fcrit``: its :func:`~curvature.fitting.umbilic.f_critical` for the sphere
+    and the cylinder; ``cylinders`` (n,): where cylinders may be tried): the fit's
+    curvature, standard error, size and kind per point, shapes (m,), NaN (0) where the
+    estimate stays."""
     nbr, d2 = query_nearest(query, int(sizes[-1]))
     nbr = np.where(outliers[nbr], -1, nbr)
     m = query.shape[0]
     out_k, out_se = np.empty(m), np.empty(m)
-    out_count = np.empty(m, np.int64)
-    umbilic_fits(points, res.normals, res.dir1, res.dir2, query, nbr, noise, sizes, fcrit,
+    out_count, out_kind = np.empty(m, np.int64), np.empty(m, np.int64)
+    umbilic_fits(points, res.normals, res.dir1, res.dir2, query, nbr, noise, sizes, *fcrit,
                  res.k1[query], res.k2[query], res.k1_std[query], res.k2_std[query],
-                 res.neighbor_count[query].astype(np.int64), out_k, out_se, out_count)
+                 res.neighbor_count[query].astype(np.int64), cylinders[query], out_k, out_se,
+                 out_count, out_kind)
     if reach is not None:
         reach[query] = np.fmax(reach[query], np.sqrt(d2[:, -1]))
-    return out_k, out_se, out_count
+    return out_k, out_se, out_count, out_kind

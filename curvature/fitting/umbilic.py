@@ -1,4 +1,5 @@
-"""Sphere fits: one curvature where a point's patch bends alike in every direction.
+"""Sphere fits: one curvature where a point's patch bends alike in every direction, and
+cylinder fits where it bends in one direction alone.
 
 A flat face (k1 = k2 = 0) and a sphere (k1 = k2 = 1/R) are umbilic. Over a point's tangent
 frame (u, v along the plane, z along its normal) both satisfy ``z = c0 + c1 u + c2 v +
@@ -42,10 +43,25 @@ At each point, over its nearest neighbors in order, for each size of :data:`SIZE
    with the smallest standard error. (Its agreement with the estimate within their
    standard errors is not asked: where the points reject the estimate they have found it
    off, by more than the standard errors of a biased fit say.)
+4. where no sphere replaces the estimate and it reads its less curved direction flat
+   (within :data:`FLAT` of its standard error of 0), a cylinder across its more curved
+   principal direction (u along it, v along the axis) may: ``z = c0 + c1 u + c2 v +
+   c3 (u^2 + z^2) / 2`` is exact on a circular cylinder at any size, as the sphere's model
+   is on a sphere (a fillet, a cylinder's side), where a height quadric over a wide patch
+   reads the circle's quartic term ``u^4 / 8 R^3`` as extra curvature. (Without the
+   estimate's flat axis asked, cylinders replaced estimates on the smooth grid's spheres
+   and ellipsoids too, up to +3 % in a cell.) Its ladder is the sphere's with the F
+   test of :data:`CYLINDER_EXTRAS` terms: ``v^2 / 2`` and ``uv`` (the surface bends along
+   the axis, or the axis is turned) and ``u^3``, ``u^4`` (the profile is no circle: the
+   patch has reached the flat face beside a fillet, or the surface is no cylinder). It
+   replaces the estimate only where the points reject that by more than :data:`REJECT_FAR`
+   (no :data:`SMALL_KEPT` waiver, :data:`FAR_SHARE` of its neighbors) with a curved reading
+   whose standard error is below that of the estimate's curved direction (waived as for
+   the sphere); the estimate's directions stay, with ``k`` across the axis and 0 along it.
 
 The F test is the classic test of nested linear models (a restriction of q = 2
-coefficients). Curvature sign: positive where the surface bends away from the normal
-(DESIGN.md section 3).
+coefficients for the sphere, :data:`CYLINDER_EXTRAS` for the cylinder). Curvature sign:
+positive where the surface bends away from the normal (DESIGN.md section 3).
 """
 
 from __future__ import annotations
@@ -57,9 +73,9 @@ from scipy.stats import f as f_distribution
 from .linalg import solve_spd
 from .quadric import tangent_basis_xyz
 
-__all__ = ["F_LEVEL", "FAR_SHARE", "FLAT", "LEPSKI", "MIN_REACH", "MIN_SHARE", "REJECT",
-           "REJECT_FAR", "RESIDUAL", "RESIDUAL_FLOOR", "SIZES", "SIZE_SHARE", "SMALL_KEPT",
-           "TRIM", "WIDE_KEPT", "f_critical", "umbilic_fits"]
+__all__ = ["CYLINDER_EXTRAS", "F_LEVEL", "FAR_SHARE", "FLAT", "LEPSKI", "MIN_REACH",
+           "MIN_SHARE", "REJECT", "REJECT_FAR", "RESIDUAL", "RESIDUAL_FLOOR", "SIZES",
+           "SIZE_SHARE", "SMALL_KEPT", "TRIM", "WIDE_KEPT", "f_critical", "umbilic_fits"]
 
 # Relative pivot under which a fit's normal matrix counts as singular.
 RANK_TOL = 1e-12
@@ -136,6 +152,12 @@ REJECT_FAR = 16.0
 #: smaller kept fits such spheres erred more than the estimates: 1.20 against 0.29 over
 #: 192 points, 0.40 against 0.12 over 384.)
 WIDE_KEPT = 2
+#: The cylinder's extra terms in its F test: ``v^2 / 2``, ``uv``, ``u^3``, ``u^4``. Without
+#: the last two (added at stop 53) a cylinder's patch reached the faces beside a fillet of
+#: 6.5 spacings and read it low: the filleted box at 0.05 % noise (bench parts, seeds 1-4)
+#: read its fillets 3 to 7 % worse with cylinders and the faces 0.5 to 1.9 %; with them
+#: 3 to 4 % better, faces within 0.4 % (docs/accuracy.md section 9, step 31).
+CYLINDER_EXTRAS = 4
 #: Inliers of a usable size, at least this share of its size.
 MIN_SHARE = 0.5
 #: A size is used only where its list reaches this many noise from the point: the noise of
@@ -146,9 +168,12 @@ MIN_SHARE = 0.5
 MIN_REACH = 12.0
 
 
-def f_critical(sizes=SIZES, level: float = F_LEVEL) -> np.ndarray:
-    """Critical values of the F test (2 and ``size - 6`` degrees of freedom), shape (s,)."""
-    return np.array([f_distribution.isf(level, 2, max(s - 6, 1)) for s in sizes])
+def f_critical(sizes=SIZES, level: float = F_LEVEL, extras: int = 2) -> np.ndarray:
+    """Critical values of the F test of ``extras`` terms (``extras`` and ``size - 4 -
+    extras`` degrees of freedom), shape (s,): the sphere's 2 by default, the cylinder's
+    :data:`CYLINDER_EXTRAS`."""
+    return np.array([f_distribution.isf(level, extras, max(s - 4 - extras, 1))
+                     for s in sizes])
 
 
 @njit(cache=True)
@@ -206,13 +231,18 @@ def _rejection(mom, rhs, zz, g, rss_sphere, s2):
 
 
 @njit(cache=True)
-def _ladder(points, normal, p, nbr, noise, sizes, fcrit, g, out_k, out_se, out_count,
-            out_reject):
-    """The sphere ladder at point ``p`` over its neighbors ``nbr`` (nearest first); fills
-    ``out_k``, ``out_se``, ``out_count`` and ``out_reject`` (s,) up to the first unusable
-    size (NaN after). ``g`` (3,): the estimate's terms (:func:`_current_terms`), whose
-    :func:`_rejection` at each usable size goes to ``out_reject``."""
-    t10, t11, t12, t20, t21, t22 = tangent_basis_xyz(normal[0], normal[1], normal[2])
+def _ladder(points, normal, frame, cylinder, p, nbr, noise, sizes, fcrit, g, out_k, out_se,
+            out_count, out_reject):
+    """The sphere ladder at point ``p`` over its neighbors ``nbr`` (nearest first), or the
+    cylinder ladder where ``cylinder`` (u across the axis); fills ``out_k``, ``out_se``,
+    ``out_count`` and ``out_reject`` (s,) up to the first unusable size (left as they were
+    after: NaN, 0). ``frame`` (6,): the tangent directions u and v (x, y, z each); ``fcrit``
+    (s,): :func:`f_critical` with the model's extra terms; ``g`` (3,): the estimate's terms
+    (:func:`_current_terms`, or its curvatures across and along the axis, negated, and 0),
+    whose :func:`_rejection` at each usable size goes to ``out_reject``."""
+    t10, t11, t12, t20, t21, t22 = frame
+    w = 0.0 if cylinder else 1.0  # the model term's weight of v^2
+    nc = 4 + (CYLINDER_EXTRAS if cylinder else 2)
     m = nbr.shape[0]
     # Lengths in units of the farthest neighbor's distance: the moments stay of order one.
     far = 0.0
@@ -226,11 +256,11 @@ def _ladder(points, normal, p, nbr, noise, sizes, fcrit, g, out_k, out_se, out_c
     if not unit > 0.0:
         return
     noise_u = noise / unit
-    mom = np.zeros((6, 6))
-    rhs = np.zeros(6)
+    mom = np.zeros((nc, nc))
+    rhs = np.zeros(nc)
     zz = 0.0
     count = 0
-    row = np.empty(6)
+    row = np.empty(nc)
     coef = np.zeros(4)
     fitted = False  # whether coef holds a smaller size's sphere (the trimming's reference)
     pos = 0
@@ -247,15 +277,20 @@ def _ladder(points, normal, p, nbr, noise, sizes, fcrit, g, out_k, out_se, out_c
             z = d0 * normal[0] + d1 * normal[1] + d2 * normal[2]
             if fitted:
                 pred = (coef[0] + coef[1] * u + coef[2] * v
-                        + 0.5 * coef[3] * (u * u + v * v + z * z))
+                        + 0.5 * coef[3] * (u * u + w * v * v + z * z))
                 if abs(z - pred) > TRIM * noise_u:
                     continue
             row[0], row[1], row[2] = 1.0, u, v
-            row[3] = 0.5 * (u * u + v * v + z * z)
-            row[4], row[5] = 0.5 * (u * u - v * v), u * v
-            for a in range(6):
+            row[3] = 0.5 * (u * u + w * v * v + z * z)
+            if cylinder:
+                row[4], row[5] = 0.5 * v * v, u * v
+                for a in range(6, nc):  # u^3, u^4
+                    row[a] = u ** (a - 3)
+            else:
+                row[4], row[5] = 0.5 * (u * u - v * v), u * v
+            for a in range(nc):
                 rhs[a] += row[a] * z
-                for b in range(6):
+                for b in range(a, nc):  # the upper triangle; mirrored where solved
                     mom[a, b] += row[a] * row[b]
             zz += z * z
             count += 1
@@ -266,6 +301,9 @@ def _ladder(points, normal, p, nbr, noise, sizes, fcrit, g, out_k, out_se, out_c
                         + (points[q, 2] - points[p, 2]) ** 2) / unit
         if reach < MIN_REACH * noise_u:
             continue  # noise across the patch too: a larger size may do
+        for a in range(nc):
+            for b in range(a):
+                mom[a, b] = mom[b, a]
         cq, ok_q = solve_spd(mom, rhs, RANK_TOL)
         # The sphere's design is the first four columns of the anisotropic one.
         mu = np.ascontiguousarray(mom[:4, :4])
@@ -273,19 +311,23 @@ def _ladder(points, normal, p, nbr, noise, sizes, fcrit, g, out_k, out_se, out_c
         cu, ok_u = solve_spd(mu, bu, RANK_TOL)
         if not (ok_q and ok_u):
             return
-        rss_q = max(zz - (cq[0] * rhs[0] + cq[1] * rhs[1] + cq[2] * rhs[2] + cq[3] * rhs[3]
-                          + cq[4] * rhs[4] + cq[5] * rhs[5]), 0.0)
+        rss_q = zz
+        for a in range(nc):
+            rss_q -= cq[a] * rhs[a]
+        rss_q = max(rss_q, 0.0)
         rss_u = max(zz - (cu[0] * bu[0] + cu[1] * bu[1] + cu[2] * bu[2] + cu[3] * bu[3]),
                     rss_q)
         # (floored: a patch without noise, in a cloud with some, still divides by it)
         s2 = max(rss_u / (count - 4), (RESIDUAL_FLOOR * noise_u) ** 2)
         if np.sqrt(s2) > RESIDUAL * noise_u:
             return
-        if rss_q > 0.0 and 0.5 * (rss_u - rss_q) / (rss_q / (count - 6)) > fcrit[j]:
+        if rss_q > 0.0 and (rss_u - rss_q) / (nc - 4) / (rss_q / (count - nc)) > fcrit[j]:
             return
         # The sphere (plane where c3 = 0) c3 |x|^2 / 2 + (c1, c2, -1) . x + c0 = 0: its
-        # curvature at any size, bending away from the normal where positive.
-        root = np.sqrt(max(1.0 + cu[1] * cu[1] + cu[2] * cu[2] - 2.0 * cu[3] * cu[0], 1e-12))
+        # curvature at any size, bending away from the normal where positive (the cylinder's
+        # across its axis, the same with v left out).
+        root = np.sqrt(max(1.0 + cu[1] * cu[1] + w * cu[2] * cu[2] - 2.0 * cu[3] * cu[0],
+                           1e-12))
         k = -cu[3] / root / unit
         se = np.sqrt(s2 * _inverse_diag(mu, 3)) / root / unit
         if not np.isfinite(se):
@@ -300,11 +342,51 @@ def _ladder(points, normal, p, nbr, noise, sizes, fcrit, g, out_k, out_se, out_c
         fitted = True
 
 
+@njit(cache=True)
+def _pick(ks, ses, counts, reject, sizes, used, low, high, cylinder):
+    """The size of a ladder's readings (``ks``, ``ses``, ``counts``, ``reject``, (s,)) that
+    replaces an estimate kept over ``used`` neighbors, -1 where none (module docstring,
+    step 3 for the sphere, step 4 for the cylinder). ``low``, ``high``: the smaller and the
+    larger of the estimate's standard errors (for a cylinder, its curved direction's
+    twice)."""
+    best, pick = np.inf, -1
+    for j in range(ks.shape[0]):
+        se = ses[j]
+        strong = reject[j] > REJECT_FAR
+        allowed = strong if cylinder else (reject[j] > REJECT or used <= SMALL_KEPT)
+        share = FAR_SHARE if strong else SIZE_SHARE
+        if not (np.isfinite(se) and allowed and counts[j] >= share * used):
+            continue
+        # a flat reading must beat the larger of the estimate's errors, a curved one both;
+        # a flat cylinder is the sphere's plane
+        flat = abs(ks[j]) <= FLAT * se
+        if flat and cylinder:
+            continue
+        limit = high if flat else low
+        if strong and used >= WIDE_KEPT * sizes[j]:
+            limit = np.inf
+        if se < limit and se < best:
+            best, pick = se, j
+    return pick
+
+
+@njit(cache=True)
+def _across(normal, d):
+    """Whether ``d`` (3,) has a direction in the tangent plane of ``normal``, and the frame
+    (u, v; x, y, z each) of the cylinder across it: u that direction, v = normal x u."""
+    dn = d[0] * normal[0] + d[1] * normal[1] + d[2] * normal[2]
+    a0, a1, a2 = d[0] - normal[0] * dn, d[1] - normal[1] * dn, d[2] - normal[2] * dn
+    na = max(np.sqrt(a0 * a0 + a1 * a1 + a2 * a2), 1e-300)
+    a0, a1, a2 = a0 / na, a1 / na, a2 / na
+    return na > 1e-12, (a0, a1, a2, normal[1] * a2 - normal[2] * a1,
+                        normal[2] * a0 - normal[0] * a2, normal[0] * a1 - normal[1] * a0)
+
+
 @njit(parallel=True, cache=True)
-def umbilic_fits(points, normals, dir1, dir2, query, nbr, noise, sizes, fcrit, k1, k2, std1,
-                 std2, used, out_k, out_se, out_count):
-    """Sphere fits where the points reject the kept estimate in their favour (module
-    docstring).
+def umbilic_fits(points, normals, dir1, dir2, query, nbr, noise, sizes, fcrit, fcrit_cylinder,
+                 k1, k2, std1, std2, used, cylinders, out_k, out_se, out_count, out_kind):
+    """Sphere fits, and cylinder fits where no sphere does, where the points reject the kept
+    estimate in their favour (module docstring).
 
     Parameters
     ----------
@@ -319,23 +401,29 @@ def umbilic_fits(points, normals, dir1, dir2, query, nbr, noise, sizes, fcrit, k
     noise : float
         The cloud's noise (length unit).
     sizes : ndarray, shape (s,), int64
-    fcrit : ndarray, shape (s,)
-        :func:`f_critical` of ``sizes``.
+    fcrit, fcrit_cylinder : ndarray, shape (s,)
+        :func:`f_critical` of ``sizes``, with 2 and with :data:`CYLINDER_EXTRAS` extra terms.
     k1, k2, std1, std2 : ndarray, shape (m,)
         The kept estimate at the query points and its standard errors.
     used : ndarray, shape (m,), int
         Its neighbor count.
+    cylinders : ndarray, shape (m,), bool
+        Where a cylinder may be tried.
     out_k, out_se : ndarray, shape (m,)
-        The sphere's curvature and its standard error where it replaces the estimate, NaN
-        elsewhere.
+        The sphere's curvature (the cylinder's across its axis) and its standard error where
+        it replaces the estimate, NaN elsewhere.
     out_count : ndarray, shape (m,), int64
         Its size (0 elsewhere): its neighbors, of which the trimming may have left some out.
+    out_kind : ndarray, shape (m,), int64
+        0: a sphere (or nothing); 1 or 2: a cylinder across the estimate's ``dir1`` or
+        ``dir2`` (its more curved direction), whose axis is the other.
     """
     s = sizes.shape[0]
     for i in prange(query.shape[0]):
         out_k[i] = np.nan
         out_se[i] = np.nan
         out_count[i] = 0
+        out_kind[i] = 0
         p = query[i]
         row = nbr[i]
         keep = np.empty(row.shape[0], np.int64)
@@ -351,21 +439,32 @@ def umbilic_fits(points, normals, dir1, dir2, query, nbr, noise, sizes, fcrit, k
         ses = np.full(s, np.nan)
         counts = np.zeros(s, np.int64)
         reject = np.full(s, np.nan)
-        _ladder(points, n, p, keep[:m], noise, sizes, fcrit, g, ks, ses, counts, reject)
-        best = np.inf
-        for j in range(s):
-            se = ses[j]
-            strong = reject[j] > REJECT_FAR
-            share = FAR_SHARE if strong else SIZE_SHARE
-            if not (np.isfinite(se) and (reject[j] > REJECT or used[i] <= SMALL_KEPT)
-                    and counts[j] >= share * used[i]):
-                continue
-            # a flat reading must beat the larger of the estimate's errors, a curved one both
-            flat = abs(ks[j]) <= FLAT * se
-            limit = max(std1[i], std2[i]) if flat else min(std1[i], std2[i])
-            if strong and used[i] >= WIDE_KEPT * sizes[j]:
-                limit = np.inf
-            if not (se < limit and se < best):
-                continue
-            best = se
-            out_k[i], out_se[i], out_count[i] = ks[j], se, sizes[j]
+        _ladder(points, n, (t10, t11, t12, t20, t21, t22), False, p, keep[:m], noise, sizes,
+                fcrit, g, ks, ses, counts, reject)
+        j = _pick(ks, ses, counts, reject, sizes, used[i], min(std1[i], std2[i]),
+                  max(std1[i], std2[i]), False)
+        if j >= 0:
+            out_k[i], out_se[i], out_count[i] = ks[j], ses[j], sizes[j]
+            continue
+        if not cylinders[i]:
+            continue
+        along = 1 if abs(k1[i]) >= abs(k2[i]) else 2
+        other, other_std = (k2[i], std2[i]) if along == 1 else (k1[i], std1[i])
+        if not abs(other) <= FLAT * other_std:
+            continue  # the estimate reads the axis curved
+        ok, frame = _across(n, dir1[p] if along == 1 else dir2[p])
+        if not ok:
+            continue
+        # the estimate across and along the axis, as the cylinder's terms
+        g[0], g[1], g[2] = (-k1[i], -k2[i], 0.0) if along == 1 else (-k2[i], -k1[i], 0.0)
+        ks[:] = np.nan
+        ses[:] = np.nan
+        counts[:] = 0
+        reject[:] = np.nan
+        _ladder(points, n, frame, True, p, keep[:m], noise, sizes, fcrit_cylinder, g, ks, ses,
+                counts, reject)
+        limit = std1[i] if along == 1 else std2[i]
+        j = _pick(ks, ses, counts, reject, sizes, used[i], limit, limit, True)
+        if j >= 0:
+            out_k[i], out_se[i], out_count[i] = ks[j], ses[j], sizes[j]
+            out_kind[i] = along

@@ -11,6 +11,7 @@ import curvature
 from curvature import synthetic
 from curvature.estimators import auto
 from curvature.fitting import umbilic
+from curvature.fitting.quadric import tangent_basis_xyz
 
 SIZES = np.array(umbilic.SIZES, np.int64)
 FCRIT = umbilic.f_critical(SIZES)
@@ -22,8 +23,9 @@ def ladder(points, normals, p, noise):
     ks, ses = np.full(SIZES.size, np.nan), np.full(SIZES.size, np.nan)
     counts = np.zeros(SIZES.size, np.int64)
     reject = np.full(SIZES.size, np.nan)
-    umbilic._ladder(points, normals[p], p, nbr.astype(np.int64), noise, SIZES, FCRIT,
-                    np.zeros(3), ks, ses, counts, reject)
+    umbilic._ladder(points, normals[p], tangent_basis_xyz(*normals[p]), False, p,
+                    nbr.astype(np.int64), noise, SIZES, FCRIT, np.zeros(3), ks, ses, counts,
+                    reject)
     return ks, ses, counts
 
 
@@ -102,8 +104,6 @@ def test_the_points_reject_a_wrong_estimate_and_keep_a_right_one():
     # (over 4 at 4.6 % of draws; measured over 200 seeds at each size: 2.6 / 3.3 / 2.9 /
     # 3.8 %) and rejects the wrong one almost everywhere (92 of 93 seeds: where only the
     # 48-point size is usable its power falls short now and then)
-    from curvature.fitting.quadric import tangent_basis_xyz
-
     frame = tangent_basis_xyz(0.0, 0.0, 1.0)
     rejected, seen = np.zeros(2), 0
     for seed in range(1, 101):
@@ -113,8 +113,8 @@ def test_the_points_reject_a_wrong_estimate_and_keep_a_right_one():
             g = umbilic._current_terms(np.array(frame[:3]), np.array(frame[3:]), k1, k2, *frame)
             out = [np.full(SIZES.size, np.nan) for _ in range(2)]
             counts, reject = np.zeros(SIZES.size, np.int64), np.full(SIZES.size, np.nan)
-            umbilic._ladder(pts, normals[p], p, nbr.astype(np.int64), 1.27 * 0.002, SIZES,
-                            FCRIT, g, out[0], out[1], counts, reject)
+            umbilic._ladder(pts, normals[p], frame, False, p, nbr.astype(np.int64),
+                            1.27 * 0.002, SIZES, FCRIT, g, out[0], out[1], counts, reject)
             usable = reject[np.isfinite(reject)]
             if usable.size:  # (a size-48 F test fails at about 5 % of the caps)
                 rejected[c] += usable[-1] > umbilic.REJECT
@@ -152,21 +152,32 @@ def small_quadric(points, p, m):
     return k[0], k[1], dirs[0], dirs[1]
 
 
-def sphere_replaces(pts, normals, p, k1, k2, d1, d2, std, used, noise, sizes=(48,)):
-    """The umbilic pass's decision at p over ``sizes`` (the 48-point size alone by default):
-    the sphere's curvature where it replaces the estimate, else NaN (the Python body of
-    umbilic_fits, so that a test may change its module constants)."""
+def decision(pts, normals, p, k1, k2, d1, d2, std, used, noise, sizes=(48,),
+             cylinders=False):
+    """The umbilic pass's decision at p over ``sizes``: the fit's curvature where it replaces
+    the estimate (else NaN) and its kind (0 a sphere, 1 or 2 a cylinder across d1 or d2).
+    Runs the Python bodies of umbilic_fits and of its decision, so that a test may change
+    their module constants."""
     n = pts.shape[0]
     sizes = np.array(sizes, np.int64)
     _, nbr = cKDTree(pts).query(pts[p], int(sizes[-1]))
-    out_k, out_se, out_count = np.empty(1), np.empty(1), np.empty(1, np.int64)
+    out = np.empty(1), np.empty(1), np.empty(1, np.int64), np.empty(1, np.int64)
     dir1, dir2 = np.zeros((n, 3)), np.zeros((n, 3))
     dir1[p], dir2[p] = d1, d2
-    umbilic.umbilic_fits.py_func(pts, normals, dir1, dir2, np.array([p]), nbr[None, :],
-                                 1.27 * noise, sizes, umbilic.f_critical(sizes),
-                                 np.array([k1]), np.array([k2]), np.array([std]),
-                                 np.array([std]), np.array([used]), out_k, out_se, out_count)
-    return out_k[0]
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(umbilic, "_pick", umbilic._pick.py_func)
+        umbilic.umbilic_fits.py_func(
+            pts, normals, dir1, dir2, np.array([p]), nbr[None, :], 1.27 * noise, sizes,
+            umbilic.f_critical(sizes), umbilic.f_critical(sizes, extras=umbilic.CYLINDER_EXTRAS),
+            np.array([k1]), np.array([k2]), np.array([std]), np.array([std]), np.array([used]),
+            np.array([cylinders]), *out)
+    return out[0][0], int(out[3][0])
+
+
+def sphere_replaces(pts, normals, p, k1, k2, d1, d2, std, used, noise, sizes=(48,)):
+    """The sphere's curvature where it replaces the estimate at p over ``sizes`` (the
+    48-point size alone by default), else NaN (:func:`decision` without cylinders)."""
+    return decision(pts, normals, p, k1, k2, d1, d2, std, used, noise, sizes)[0]
 
 
 def test_a_small_kept_quadric_gives_way_to_the_sphere_over_its_own_points(monkeypatch):
@@ -244,6 +255,124 @@ def test_a_widest_fit_the_points_reject_strongly_gives_way_to_a_sixth_of_its_siz
     assert np.all(np.abs(replaced - 0.5) < 0.05)
     assert quarter == 0
     assert right == 0
+
+
+def cylinder_ladder(pts, normal, across, p, noise, sizes=SIZES, python=False):
+    """The cylinder ladder at point p (u along ``across``): curvature, standard error and
+    inliers per size; the Python body where ``python`` (so that a test may change
+    CYLINDER_EXTRAS)."""
+    _, nbr = cKDTree(pts).query(pts[p], int(sizes[-1]))
+    frame = tuple(across) + tuple(np.cross(normal, across))
+    ks, ses = np.full(sizes.size, np.nan), np.full(sizes.size, np.nan)
+    counts, reject = np.zeros(sizes.size, np.int64), np.full(sizes.size, np.nan)
+    run = umbilic._ladder.py_func if python else umbilic._ladder
+    run(pts, normal, frame, True, p, nbr.astype(np.int64), 1.27 * noise, sizes,
+        umbilic.f_critical(sizes, extras=umbilic.CYLINDER_EXTRAS), np.zeros(3), ks, ses,
+        counts, reject)
+    return ks, ses, counts
+
+
+def test_a_cylinder_reads_one_over_r_at_every_size_within_its_standard_errors():
+    # R = 2, noise 0.002 (a spacing 0.016); a sphere's ladder turns it down (its F test)
+    pts, normals, p = patch("cylinder", 0.002, 1)
+    ks, ses, counts = cylinder_ladder(pts, normals[p], np.array([1.0, 0.0, 0.0]), p, 0.002)
+    assert np.all(np.isfinite(ks)) and np.all(counts >= SIZES // 2)
+    assert np.all(np.abs(ks - 0.5) <= 3.0 * ses)
+    assert np.all(np.diff(ses) < 0.0)
+    assert np.isnan(ladder(pts, normals, p, 1.27 * 0.002)[0][-1])
+
+
+def fillet(seed, arc, radius=0.1, noise=0.0005, n=6000):
+    """A fillet between two faces: z = 0 for x >= 0, a quarter cylinder of ``radius``
+    (axis along y, bending away from +z) below it, then the face x = -radius; a square of
+    side 1 in arc length across the axis and in y (a spacing 0.013), noisy. Point 0 lies on
+    the cylinder, ``arc`` from the first face; returns the points, its normal and the
+    direction across the axis there."""
+    rng = np.random.default_rng(seed)
+    s = np.concatenate([[-arc], rng.uniform(-0.5, 0.5, n)])
+    y = np.concatenate([[0.0], rng.uniform(-0.5, 0.5, n)])
+    quarter = 0.5 * np.pi * radius
+    angle = np.clip(s, -quarter, 0.0) / radius
+    x = np.where(s < -quarter, -radius, np.where(s < 0.0, radius * np.sin(angle), s))
+    z = np.where(s < 0.0, -radius * (1.0 - np.cos(angle)), 0.0) + np.minimum(s + quarter, 0.0)
+    pts = np.column_stack([x, y, z]) + rng.normal(0.0, noise, (n + 1, 3))
+    t = -arc / radius
+    return pts, np.array([np.sin(t), 0.0, np.cos(t)]), np.array([np.cos(t), 0.0, -np.sin(t)])
+
+
+def test_the_cylinder_ladder_ends_where_its_patch_reaches_the_face(monkeypatch):
+    # Fillet points 0.4 to 3 spacings from a face (k = 10), 10 seeds each: a circle fitted
+    # over a patch that reaches the face reads it low, which the F test's u^3 and u^4 terms
+    # see. With them, 10 sizes usable, errors at most 1.11; with the F test of v^2 and uv
+    # alone (the sphere's two extra terms), 27 usable, 8 of them erring more than 1.5 (up to
+    # 5.1, 48-point fits 0.4 spacings from the face).
+    with_terms, without = [], []
+    for arc in (0.005, 0.02, 0.04):
+        for seed in range(1, 11):
+            pts, normal, across = fillet(seed, arc)
+            with_terms.extend(cylinder_ladder(pts, normal, across, 0, 0.0005)[0])
+            with monkeypatch.context() as mp:
+                mp.setattr(umbilic, "CYLINDER_EXTRAS", 2)
+                without.extend(cylinder_ladder(pts, normal, across, 0, 0.0005,
+                                               python=True)[0])
+    err = np.abs(np.array(with_terms) - 10.0)
+    err_without = np.abs(np.array(without) - 10.0)
+    err, err_without = err[np.isfinite(err)], err_without[np.isfinite(err_without)]
+    assert err.size >= 5 and err.max() < 1.5
+    assert (err_without > 1.5).sum() >= 6
+
+
+def test_a_wide_estimate_the_points_reject_gives_way_to_a_cylinder():
+    # A 384-point estimate reading k1 = 0.3 across a cylinder of k = 0.5 (noise 0.0005),
+    # standard errors 0.05: no sphere is usable (the F test), a cylinder across its dir1
+    # replaces it. 10 seeds: replaced at 9 (at the other no size passes the ladder's own
+    # tests), errors at most 0.09 (a 96-point cylinder), mean 0.018. The right estimate
+    # stays at every seed, and nothing replaces the wrong one where cylinders are not
+    # allowed, nor where it reads the axis curved (k2 = 0.2, 4 of its standard errors).
+    d1, d2 = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
+    read, right, off, curved_axis = [], 0, 0, 0
+    for seed in range(1, 11):
+        pts, normals, p = patch("cylinder", 0.0005, seed)
+        args = (pts, normals, p)
+        k, kind = decision(*args, 0.3, 0.0, d1, d2, 0.05, 384, 0.0005, (48, 96, 192), True)
+        read.append(k if kind == 1 else np.nan)
+        right += np.isfinite(decision(*args, 0.5, 0.0, d1, d2, 0.05, 384, 0.0005,
+                                      (48, 96, 192), True)[0])
+        off += np.isfinite(decision(*args, 0.3, 0.0, d1, d2, 0.05, 384, 0.0005,
+                                    (48, 96, 192), False)[0])
+        curved_axis += np.isfinite(decision(*args, 0.3, 0.2, d1, d2, 0.05, 384, 0.0005,
+                                            (48, 96, 192), True)[0])
+        # across dir2 where that is the more curved direction
+        k, kind = decision(*args, 0.0, 0.3, d2, d1, 0.05, 384, 0.0005, (48, 96, 192), True)
+        assert kind in (0, 2) and (kind == 0 or abs(k - 0.5) < 0.15)
+    read = np.array(read)
+    assert np.isfinite(read).sum() >= 8
+    assert np.nanmax(np.abs(read - 0.5)) < 0.15
+    assert np.nanmean(np.abs(read - 0.5)) < 0.04
+    assert right == 0 and off == 0 and curved_axis == 0
+
+
+def test_a_cylinder_is_stored_across_its_axis_with_k1_above_k2():
+    from types import SimpleNamespace
+
+    from curvature.estimators.umbilic_pass import _store
+
+    x, y = np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0])
+    res = SimpleNamespace(k1=np.zeros(4), k2=np.zeros(4), k1_std=np.zeros(4),
+                          k2_std=np.zeros(4), mean_std=np.zeros(4),
+                          neighbor_count=np.zeros(4, np.int64), dir1=np.tile(x, (4, 1)),
+                          dir2=np.tile(y, (4, 1)))
+    # a sphere, a cylinder across dir1 (convex, concave), one across dir2 (convex)
+    _store(res, np.arange(4), np.array([0.5, 0.5, -0.5, 0.5]), np.full(4, 0.01),
+           np.full(4, 96), np.array([0, 1, 1, 2]), 0.0)
+    np.testing.assert_array_equal(res.k1, [0.5, 0.5, 0.0, 0.5])
+    np.testing.assert_array_equal(res.k2, [0.5, 0.0, -0.5, 0.0])
+    # the curved direction is dir1 where k1 is the cylinder's k, dir2 where k2 is; the
+    # frame's handedness (dir1 x dir2) stays
+    np.testing.assert_array_equal(res.dir1, [x, x, y, y])
+    np.testing.assert_array_equal(res.dir2, [y, y, -x, -x])
+    assert np.all(res.k1_std >= 0.01) and np.all(res.mean_std[1:] == 0.5 * res.k1_std[1:])
+    assert np.all(res.neighbor_count == 96)
 
 
 @pytest.fixture(scope="module")
@@ -355,3 +484,44 @@ def test_the_denser_box_tries_its_faces_widest_fits(dense_box, monkeypatch):
     # fewer 1152-point estimates left on the faces (25,462 -> 20,675)
     assert (res.neighbor_count[face] == 1152).sum() < 0.9 * (
         without.neighbor_count[face] == 1152).sum()
+
+
+def test_the_denser_box_reads_its_fillets_better_with_cylinders(dense_box, monkeypatch):
+    # Its fillets (radius 18 spacings) keep 384- and 768-point quadrics that read k1 too
+    # high (a circle's quartic term); cylinders read them 0.206 -> 0.152 (mean of the larger
+    # error), faces and corners unchanged. Where one replaced an estimate (3,852 of 18,972
+    # fillet points, which erred 0.317 and now 0.054), k2 is 0 and dir1 lies across the
+    # fillet (mean |dir1 . true dir1| 0.9999).
+    from curvature.estimators import umbilic_pass
+
+    cloud, res = dense_box
+    monkeypatch.setattr(umbilic_pass, "CYLINDERS", False)
+    without = curvature.estimate(cloud.points, normals=cloud.normals)
+    assert worst(cloud, res, "fillet") < 0.85 * worst(cloud, without, "fillet")
+    for region in ("face", "corner"):
+        assert worst(cloud, res, region) <= 1.01 * worst(cloud, without, region)
+    fillet_points = cloud.region_mask("fillet")
+    cylinder = fillet_points & (res.k2 == 0.0) & (without.k2 != 0.0)
+    assert cylinder.sum() > 0.1 * fillet_points.sum()
+    err = np.fmax(np.abs(res.k1 - cloud.k1), np.abs(res.k2 - cloud.k2))
+    err_without = np.fmax(np.abs(without.k1 - cloud.k1), np.abs(without.k2 - cloud.k2))
+    assert err[cylinder].mean() < 0.3 * err_without[cylinder].mean()
+    assert np.all(res.k1[res.status == 0] >= res.k2[res.status == 0])
+    assert np.mean(np.abs(np.einsum("ij,ij->i", res.dir1[cylinder],
+                                    cloud.dir1[cylinder]))) > 0.95
+
+
+def test_cylinders_leave_the_circles_across_rounded_edges_alone(monkeypatch):
+    # A thin plate's rims (a rounded edge of radius 1.3 spacings): a cylinder there would
+    # span both sides (without the mask its rims read 1.32 -> 2.49, bench parts seeds 1-4)
+    from curvature.estimators import umbilic_pass
+    from curvature.studies.parts import CASES
+
+    shape, kw = CASES["plate_0.1"]
+    cloud = synthetic.make(shape, seed=1, **kw)
+    res = curvature.estimate(cloud.points, normals=cloud.normals)
+    monkeypatch.setattr(umbilic_pass, "CYLINDERS", False)
+    without = curvature.estimate(cloud.points, normals=cloud.normals)
+    rim = cloud.region_mask("rim")
+    assert worst(cloud, res, "rim") <= 1.01 * worst(cloud, without, "rim")
+    assert np.array_equal(res.k1[rim], without.k1[rim], equal_nan=True)
