@@ -774,6 +774,9 @@ class AutoRun:
         # Points a circle across a rounded thin edge read (:meth:`_store_rounded_edges`): no
         # cylinder fit replaces them (it would span the edge's two sides)
         self.edge_read = np.zeros(points.shape[0], bool)
+        # Points whose standard errors are their own fit's, which the neighbor spread does
+        # not widen (the sphere and cylinder fits; curvature.pipeline.widen_by_neighbors)
+        self.own_std = np.zeros(points.shape[0], bool)
         # The share of the hash (:func:`thinned_points`) these points are, of the cloud they
         # were thinned from (1: none); a coarser share of them must thin further below it.
         self.hash_share = 1.0
@@ -1121,7 +1124,7 @@ class AutoRun:
         umbilic_pass(self.points, nearest, res, rows, self._noise(), kc, self.outliers,
                      self.chunk_size, self.reach if self.track_reach else None,
                      1.0 / self.plan.spacing, self._grow_total, self._tick,
-                     cylinders=~self.edge_read)
+                     cylinders=~self.edge_read, own_std=self.own_std)
         self.tree = None
         self.timings["umbilic"] = time.perf_counter() - t0
 

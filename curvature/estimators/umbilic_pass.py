@@ -19,11 +19,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..fitting.umbilic import CYLINDER_EXTRAS, SIZES, f_critical, umbilic_fits
+from ..fitting.umbilic import CYLINDER_EXTRAS, SIZES, f_critical, reads_axis_flat, umbilic_fits
 from ..status import Status
-from ..uncertainty import with_floor
+from ..uncertainty import OWN_STD_SCALE, with_floor
 
-__all__ = ["CYLINDERS", "SHORT_SHARE", "SHORT_SIZES", "TRIED_SHARE", "candidates", "umbilic_pass"]
+__all__ = ["CYLINDERS", "CYLINDER_SHARE", "SHORT_SHARE", "SHORT_SIZES", "TRIED_SHARE", "candidates",
+           "umbilic_pass"]
 
 
 #: Only estimates kept over at most this many times the largest sphere's neighbors are tried:
@@ -43,6 +44,19 @@ TRIED_SHARE = 3
 #: scan 1.15 times (this way 1.13, 1.29 and 1.02 times; docs/accuracy.md section 9, step 28).
 SHORT_SIZES = 3
 SHORT_SHARE = 2
+#: ... and so are the estimates kept over at least this many times the short ladder's last
+#: size (384) that read their less curved direction flat, where a cylinder may replace them
+#: (added at stop 54): a fillet's middle keeps 384-point quadrics, which read its circle's
+#: quartic term as curvature, and only a 384-point cylinder is precise enough to show that.
+#: The 96,000-point filleted box at 0.05 % noise read its fillets 0.152 -> 0.125 (mean of the
+#: larger error, regions of fixed width; those more than 4 plan spacings from a jump 0.148 ->
+#: 0.106), the bench's blade its crest 7.9 % better, PCL's table scan in 1.03 times the time.
+#: With 1 (the estimates kept over 192 too) the bench's parts gained a little more (the
+#: 48,000-point box's fillets 0.139 -> 0.134, the blade's sides -1.2 % instead of -0.3 %),
+#: but the table scan took 1.10 to 1.15 times as long; with every such estimate, also those
+#: kept over 48 and 96, the blade's sides -4.9 %, the 20,000-point blade in 1.5 times the
+#: time (docs/accuracy.md section 9, step 32).
+CYLINDER_SHARE = 2
 #: Whether cylinder fits may replace estimates where no sphere does (added at stop 53;
 #: docs/accuracy.md section 9, step 31).
 CYLINDERS = True
@@ -57,7 +71,7 @@ def candidates(res, rows: np.ndarray, largest: int) -> np.ndarray:
 
 def umbilic_pass(points, query_nearest, res, rows, noise: float, largest: int,
                  outliers: np.ndarray, chunk: int, reach=None, floor_scale=0.0, grow=None,
-                 tick=None, cylinders=None):
+                 tick=None, cylinders=None, own_std=None):
     """Replace the estimates of ``rows`` where a sphere or cylinder fit reads them better, in
     place.
 
@@ -89,6 +103,10 @@ def umbilic_pass(points, query_nearest, res, rows, noise: float, largest: int,
     cylinders : ndarray, shape (n,), bool, optional
         Where cylinder fits may be tried (everywhere by default, nowhere where
         :data:`CYLINDERS` is false).
+    own_std : ndarray, shape (n,), bool, optional
+        Set where a fit replaced the estimate: its standard errors are its own
+        (:data:`~curvature.uncertainty.OWN_STD_SCALE`), not to be widened by the neighbor
+        spread.
 
     Returns
     -------
@@ -106,10 +124,10 @@ def umbilic_pass(points, query_nearest, res, rows, noise: float, largest: int,
     # the short ladder (a shorter list), only the wider ones over every size: a 384-point
     # sphere costs a 384-neighbor query (docs/accuracy.md, section 9, step 28).
     short = sizes[:SHORT_SIZES]
-    wide = res.neighbor_count[query_rows] > SHORT_SHARE * short[-1]
-    replaced = 0
     if cylinders is None or not CYLINDERS:
         cylinders = np.full(n, CYLINDERS)
+    wide = _wide(res, query_rows, int(short[-1]), cylinders)
+    replaced = 0
     for group, ladder in ((query_rows[~wide], short), (query_rows[wide], sizes)):
         fcrit = (f_critical(ladder), f_critical(ladder, extras=CYLINDER_EXTRAS))
         for start in range(0, group.shape[0], chunk):
@@ -118,17 +136,30 @@ def umbilic_pass(points, query_nearest, res, rows, noise: float, largest: int,
                         reach, cylinders)
             ok = np.isfinite(out[0])
             _store(res, query[ok], *(x[ok] for x in out), floor_scale)
+            if own_std is not None:
+                own_std[query[ok]] = True
             replaced += int(ok.sum())
             if tick is not None:
                 tick(query.shape[0])
     return replaced
 
 
+def _wide(res, rows, short_last: int, cylinders) -> np.ndarray:
+    """Which of ``rows`` (shape (r,)) are tried over every size, shape (r,), bool: the
+    estimates kept over more than :data:`SHORT_SHARE` times ``short_last`` neighbors, and
+    those kept over at least :data:`CYLINDER_SHARE` times it that a cylinder may replace."""
+    count = res.neighbor_count[rows]
+    flat_axis = reads_axis_flat(res.k1[rows], res.k2[rows], res.k1_std[rows], res.k2_std[rows])
+    return (count > SHORT_SHARE * short_last) | (
+        (count >= CYLINDER_SHARE * short_last) & cylinders[rows] & flat_axis)
+
+
 def _store(res, at, k, se, count, kind, floor_scale) -> None:
     """Write the fits that replace the estimates at ``at`` (shape (r,); the other arrays as
     :func:`_fits` returns them there) into ``res``: a sphere's k as k1 and k2, a cylinder's
     across its axis and 0 along it, ordered k1 >= k2 (the estimate's directions stay,
-    swapped where the order asks it, (d1, d2) -> (d2, -d1) to keep their handedness)."""
+    swapped where the order asks it, (d1, d2) -> (d2, -d1) to keep their handedness); the
+    fit's standard error times :data:`~curvature.uncertainty.OWN_STD_SCALE` for both."""
     cylinder = kind > 0
     k1 = np.where(cylinder, np.maximum(k, 0.0), k)
     k2 = np.where(cylinder, np.minimum(k, 0.0), k)
@@ -136,7 +167,7 @@ def _store(res, at, k, se, count, kind, floor_scale) -> None:
     d1, d2 = res.dir1[at], res.dir2[at]
     res.dir1[at] = np.where(swap[:, None], d2, d1)
     res.dir2[at] = np.where(swap[:, None], -d1, d2)
-    std = with_floor(se, k1, k2, floor_scale)
+    std = with_floor(OWN_STD_SCALE * se, k1, k2, floor_scale)
     res.k1[at], res.k2[at] = k1, k2
     res.k1_std[at] = std
     res.k2_std[at] = std

@@ -75,7 +75,8 @@ from .quadric import tangent_basis_xyz
 
 __all__ = ["CYLINDER_EXTRAS", "F_LEVEL", "FAR_SHARE", "FLAT", "LEPSKI", "MIN_REACH",
            "MIN_SHARE", "REJECT", "REJECT_FAR", "RESIDUAL", "RESIDUAL_FLOOR", "SIZES",
-           "SIZE_SHARE", "SMALL_KEPT", "TRIM", "WIDE_KEPT", "f_critical", "umbilic_fits"]
+           "SIZE_SHARE", "SMALL_KEPT", "TRIM", "WIDE_KEPT", "f_critical", "reads_axis_flat",
+           "umbilic_fits"]
 
 # Relative pivot under which a fit's normal matrix counts as singular.
 RANK_TOL = 1e-12
@@ -174,6 +175,17 @@ def f_critical(sizes=SIZES, level: float = F_LEVEL, extras: int = 2) -> np.ndarr
     :data:`CYLINDER_EXTRAS`."""
     return np.array([f_distribution.isf(level, extras, max(s - 4 - extras, 1))
                      for s in sizes])
+
+
+def reads_axis_flat(k1, k2, std1, std2) -> np.ndarray:
+    """Whether estimates read their less curved direction flat, within :data:`FLAT` of its
+    standard error of 0 (where a cylinder may replace them; step 4 of the module
+    docstring), shape (m,), bool; ``k1``, ``k2``, ``std1``, ``std2``: shape (m,)."""
+    k1, k2 = np.asarray(k1, float), np.asarray(k2, float)
+    along_first = np.abs(k1) >= np.abs(k2)
+    other = np.where(along_first, k2, k1)
+    other_std = np.where(along_first, std2, std1)
+    return np.abs(other) <= FLAT * other_std
 
 
 @njit(cache=True)

@@ -130,7 +130,7 @@ def design_std(points, query, indptr, indices, include_self, dir1, dir2, residua
 
 
 @njit(parallel=True, cache=True)
-def add_neighbor_spread(k1, k2, normals, graph, weight, k1_std, k2_std, mean_std):
+def add_neighbor_spread(k1, k2, normals, graph, weight, k1_std, k2_std, mean_std, skip):
     """Widen each point's standard errors by how far its neighbors' curvatures lie from its
     own, in place: ``std = hypot(std, weight * spread)`` with ``spread`` the RMS difference
     over the neighbors with an estimate.
@@ -151,10 +151,13 @@ def add_neighbor_spread(k1, k2, normals, graph, weight, k1_std, k2_std, mean_std
     k1_std, k2_std, mean_std : ndarray, shape (n,)
         Standard errors, updated in place (only the point's own: the spread reads no
         standard error).
+    skip : ndarray, shape (n,), bool
+        Points whose standard errors stay as they are (their curvatures are still read as
+        the others' neighbors).
     """
     n = k1.shape[0]
     for i in prange(n):
-        if not np.isfinite(k1[i]):
+        if skip[i] or not np.isfinite(k1[i]):
             continue
         h = 0.5 * (k1[i] + k2[i])
         s1, s2, sh = 0.0, 0.0, 0.0

@@ -164,20 +164,21 @@ def estimate(points, method: str | None = None, *, fit: str | None = None, prese
         if tiles is None:
             block = compute_block(spts, s_faces, req, progress=progress)
             res, graph, info, timings = block.result, block.graph, block.info, block.timings
+            own_std = block.own_std
         else:
-            res, graph, info, timings = run_tiled(spts, s_faces, req, tiles, progress,
-                                                  executor)
+            res, graph, info, timings, own_std = run_tiled(spts, s_faces, req, tiles,
+                                                           progress, executor)
         release_freed_memory()  # what the block's run freed, before orientation's arrays
         t0 = time.perf_counter()
         orient(res, req.mode, s_normals, s_vp, graph)
         timings["orientation"] = time.perf_counter() - t0
         if req.method == "auto":
             t0 = time.perf_counter()
-            widen_by_neighbors(res, spts, graph, req.chunk_size)
+            widen_by_neighbors(res, spts, graph, req.chunk_size, own_std)
             timings["neighbor_spread"] = time.perf_counter() - t0
     # The Z-ordered copies are not needed past orientation (the result's points are replaced
     # by the input's): freed before the fields are reordered, when memory peaks.
-    del graph, spts, s_normals, s_vp
+    del graph, spts, s_normals, s_vp, own_std
     res.points = None
     release_freed_memory()
     with numba_threads(req.workers):
@@ -231,9 +232,12 @@ def derive_fields(res: CurvatureResult, diagonal: float) -> None:
                                       res.neighbor_count[sl], res.status[sl], diagonal)
 
 
-def widen_by_neighbors(res: CurvatureResult, points: np.ndarray, graph, chunk_size: int) -> None:
+def widen_by_neighbors(res: CurvatureResult, points: np.ndarray, graph, chunk_size: int,
+                       own_std: np.ndarray | None = None) -> None:
     """Widen the default's standard errors by its neighbors' disagreement, in place
-    (:data:`~curvature.uncertainty.NEIGHBOR_SPREAD_WEIGHT`).
+    (:data:`~curvature.uncertainty.NEIGHBOR_SPREAD_WEIGHT`), except at ``own_std`` (n,),
+    bool: the sphere and cylinder fits, whose standard errors are their own
+    (:data:`~curvature.uncertainty.OWN_STD_SCALE`).
 
     ``graph`` (n, ORIENT_K), the orientation's neighbor rows where orientation "auto" made
     them, else made here: the same nearest neighbors (each point first) whatever the mode.
@@ -241,8 +245,10 @@ def widen_by_neighbors(res: CurvatureResult, points: np.ndarray, graph, chunk_si
     if graph is None:
         graph = np.empty((points.shape[0], ORIENT_K), np.int32)
         neighbor_rows(points, build_tree(points), graph, chunk_size)
+    if own_std is None:
+        own_std = np.zeros(points.shape[0], bool)
     add_neighbor_spread(res.k1, res.k2, res.normals, graph, NEIGHBOR_SPREAD_WEIGHT,
-                        res.k1_std, res.k2_std, res.mean_std)
+                        res.k1_std, res.k2_std, res.mean_std, own_std)
 
 
 def orient(res: CurvatureResult, mode: str, ref_normals, viewpoint, graph) -> None:

@@ -31,6 +31,9 @@ class Block:
         With ``track_reach``: a distance from each query point within which lies every point
         its result depends on.
     info, timings : dict
+    own_std : ndarray, shape (m,), bool, or None
+        Method "auto": the query points whose standard errors are their own fit's, not to be
+        widened by the neighbor spread (:func:`curvature.pipeline.widen_by_neighbors`).
     """
 
     result: CurvatureResult
@@ -38,6 +41,7 @@ class Block:
     reach: np.ndarray | None
     info: dict
     timings: dict
+    own_std: np.ndarray | None = None
 
 
 def compute_block(spts, s_faces, req: Request, query=None, *, progress=None, plan=None,
@@ -83,12 +87,13 @@ def compute_block(spts, s_faces, req: Request, query=None, *, progress=None, pla
         timings.update(run.timings)
         info = {"method": "auto", "params": req.auto_params,
                 "fit": "implicit" if run.plan.clean else "nfr", "plan": run.plan.to_dict()}
-        reach = run.reach
+        reach, own_std = run.reach, run.own_std
         if not whole:
             res = select_rows(res, query, spts[query])
             graph = None if graph is None else graph[query]
             reach = None if reach is None else reach[query]
-        return Block(res, graph, reach, info, timings)
+            own_std = own_std[query]
+        return Block(res, graph, reach, info, timings, own_std)
     if query is None:
         query = np.arange(n, dtype=np.int64)
     finder = make_finder(spts, req.method, faces=s_faces, **req.method_params)

@@ -116,7 +116,8 @@ class TileInput:
 @dataclass
 class TileOutput:
     """A computed tile: result rows of its own points, graph rows in cloud indices, and
-    whether the halo held every point's reach (``short``: how many did not)."""
+    whether the halo held every point's reach (``short``: how many did not); ``own_std``
+    (its points, bool, or None) as :class:`~curvature.pipeline.block.Block`'s."""
 
     tile: Tile
     fields: dict
@@ -125,6 +126,7 @@ class TileOutput:
     needed: float
     info: dict
     seconds: float
+    own_std: np.ndarray | None = None
 
 
 def halo_guess(req: Request, spacing: float, fit_radius: float = math.nan) -> float:
@@ -310,7 +312,7 @@ def compute_tile(inp: TileInput, progress=None) -> TileOutput:
     fields = {k: v for k, v in block.result.fields().items() if k not in DERIVED}
     return TileOutput(inp.tile, fields, graph, int(short.sum()),
                       float(np.nanmax(block.reach)) if block.reach.size else 0.0, block.info,
-                      time.perf_counter() - t0)
+                      time.perf_counter() - t0, block.own_std)
 
 
 def grown(tile: Tile, out: TileOutput, extent: float) -> Tile:
@@ -383,6 +385,7 @@ class TiledRun:
         self.tiles = make_tiles(self.spts, self.tile_points,
                                 halo_guess(self.req, self.plan.spacing, radius))
         self.result = empty_result(self.spts, self.s_faces)
+        self.own_std = np.zeros(n, bool)
         self.info: dict = {}
         self.seconds = 0.0
         self.done = 0
@@ -402,6 +405,8 @@ class TiledRun:
                 getattr(self.result, name)[sl] = arr
         if out.graph is not None:  # (dense clouds: made for the whole cloud)
             self.graph[sl] = out.graph
+        if out.own_std is not None:
+            self.own_std[sl] = out.own_std
         self.tiles[out.tile.index] = out.tile
         self.info = out.info
         self.seconds += out.seconds
@@ -424,6 +429,9 @@ def run_tiled(spts, s_faces, req: Request, tile_points: int, progress=None, exec
     graph : ndarray or None
         Orientation graph (n, ORIENT_K) in Z-order indices.
     info, timings : dict
+    own_std : ndarray, shape (n,), bool
+        The points whose standard errors are their own fit's
+        (:class:`~curvature.pipeline.block.Block`).
     """
     t0 = time.perf_counter()
     run = TiledRun(spts, s_faces, req, tile_points, progress=progress)
@@ -451,7 +459,7 @@ def run_tiled(spts, s_faces, req: Request, tile_points: int, progress=None, exec
     else:
         run_on(executor, run, progress)
     timings = {"plan": t_plan, "tiles": run.seconds, "wall": time.perf_counter() - t0 - t_plan}
-    return run.result, run.graph, run.summary(), timings
+    return run.result, run.graph, run.summary(), timings, run.own_std
 
 
 def run_on(executor, run: TiledRun, progress=None, in_flight: int | None = None) -> None:
