@@ -176,12 +176,14 @@ def test_neighbor_spread_widens_only_where_neighbors_disagree():
     assert std[1][3] == pytest.approx(0.1)
     assert std[2][3] == pytest.approx(np.hypot(0.1, 1.5 * 1.0))  # H: 1.75 against 0.75
     assert all(np.isnan(s[4]) for s in std)
-    # a skipped point keeps its own; its curvatures are still read by the others
-    std = [np.full(5, 0.1) for _ in range(3)]
-    skip = np.array([False, False, False, True, False])
-    add_neighbor_spread(k1, k2, normals, graph, 1.5, *std, skip)
-    assert all(s[3] == 0.1 for s in std)
-    assert np.allclose([s[:3] for s in std], 0.1)
+    # a skipped point keeps its own standard errors however its neighbors disagree (3), and
+    # its curvatures are still read by the others (0, which 3 reads)
+    for skipped in (0, 3):
+        std = [np.full(5, 0.1) for _ in range(3)]
+        add_neighbor_spread(k1, k2, normals, graph, 1.5, *std, np.arange(5) == skipped)
+        assert all(s[skipped] == 0.1 for s in std)
+        if skipped == 0:
+            assert std[0][3] == pytest.approx(np.hypot(0.1, 1.5 * 2.0))
 
 
 def test_default_standard_errors_do_not_depend_on_the_orientation_mode():
