@@ -23,7 +23,9 @@ Where the standard errors come from (each from the fit that produced the value):
   from other fits or at other places, disagree;
 - except the sphere and cylinder fits of the default's last pass
   (:mod:`curvature.fitting.umbilic`): their least-squares standard error times
-  :data:`OWN_STD_SCALE`, which the neighbor spread leaves as it is.
+  :data:`OWN_STD_SCALE`, which the neighbor spread leaves as it is; and the tips of thin
+  wedges (:mod:`curvature.fitting.wedge_tip`): the standard error of k across the edge from
+  the fit of its radius and of the faces' apex, which the spread leaves too.
 
 A floor of :data:`STD_FLOOR` of the curvature itself stands for the discretisation error no
 residual shows (sampling, foot point).

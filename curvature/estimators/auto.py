@@ -41,6 +41,9 @@ On noisy scans the neighborhood size decides the error far more than the fit mod
    clean clouds the implicit quadric over 24 neighbors is replaced by one over 16 or 12 where it
    straddles a curvature jump (its residual far above the smaller fits'), and a fit with
    ``|k| h > 1`` goes to the anchored fits.
+6. **Features the fits cannot resolve**, both branches at the end: sphere and cylinder fits
+   where the points prefer them (noisy clouds, :mod:`.umbilic_pass`), and the tips of thin
+   wedges, whose radius the faces fix (:mod:`.wedge_tip_pass`).
 
 Everything depends on the points' coordinates only, never on their order, so the results are
 identical for any point order and any ``workers``.
@@ -108,6 +111,7 @@ from .beside_edges import (
 from .sampling import cell_ijk, grid_keys, thinned
 from .umbilic_pass import umbilic_pass
 from .wall_sides import one_side_normals
+from .wedge_tip_pass import wedge_tip_pass
 
 # Neighbors of the spacing and noise measurements and of the clean-cloud fit.
 PLAN_K = 24
@@ -224,6 +228,10 @@ CLEAN_SUPPORT = 1.0
 # A point adopts a neighbor's far better fit (curvature.fitting.shifted) only if it lies on
 # that fit's quadric within this many spacings.
 CLEAN_ON_SURFACE = 1e-7
+# The wedge-tip fits' noise on clean clouds (spacings): their tolerance for the profile's
+# lines and arc. Noise-free, the bench's blade's trailing edge (k = 100, 0.7 spacings) read
+# 100.0 to 100.6 (p10 to p90) at all its 91 points with 0.07; with 0.007, 50 of them.
+CLEAN_WEDGE_NOISE = 0.05
 # Dense noisy clouds (relative wide noise above ``dense_noise``) are fitted on a random share
 # of their points with relative wide noise DENSE_TARGET, whose normals come from the whole
 # cloud: there a fixed neighbor count covers the patch it covers on a cloud of the right
@@ -847,6 +855,8 @@ class AutoRun:
             failed = np.flatnonzero(res.status != Status.OK)
             if failed.size:  # rare: an implicit fit failed; its cell anchor's field takes over
                 self._fallback(res, field, radius[0], reps, owner, max(kc // 2, 12), failed)
+            self._wedge_tips(res, np.arange(n, dtype=np.int64), kc,
+                             max(self._noise(), CLEAN_WEDGE_NOISE * self.plan.spacing))
             return
         # Handed over in a list so that nothing here keeps them once the fits are made.
         stage1 = [field, radius[0]]
@@ -1114,7 +1124,7 @@ class AutoRun:
         """Sphere and cylinder fits at ``rows`` where they read a point better than its
         estimate (:mod:`~curvature.estimators.umbilic_pass`; flat faces and sphere-like
         corners beside features, fillets), over at most ``kc`` neighbors (docs/accuracy.md
-        section 9, steps 27 and 31)."""
+        section 9, steps 27 and 31), then the wedge tips (:meth:`_wedge_tips`)."""
         t0 = time.perf_counter()
 
         def nearest(idx, k):
@@ -1125,8 +1135,25 @@ class AutoRun:
                      self.chunk_size, self.reach if self.track_reach else None,
                      1.0 / self.plan.spacing, self._grow_total, self._tick,
                      cylinders=~self.edge_read, own_std=self.own_std)
-        self.tree = None
         self.timings["umbilic"] = time.perf_counter() - t0
+        self._wedge_tips(res, rows, kc, self._noise())
+        self.tree = None
+
+    def _wedge_tips(self, res, rows, kc, noise) -> None:
+        """Fits at the tips of thin wedges (:mod:`~curvature.estimators.wedge_tip_pass`) at
+        the rounded edges' candidates among ``rows``, over at most ``kc`` neighbors, with the
+        cloud's ``noise`` (docs/accuracy.md section 9, step 33)."""
+        t0 = time.perf_counter()
+
+        def nearest(idx, k):
+            _, indices, d2 = knn_csr(self.points, self.tree, idx, k)
+            return indices.reshape(-1, k), d2
+
+        wedge_tip_pass(self.points, nearest, res, rows, noise, kc, self.outliers,
+                       self.edge_candidates, self.chunk_size,
+                       self.reach if self.track_reach else None, 1.0 / self.plan.spacing,
+                       own_std=self.own_std)
+        self.timings["wedge tips"] = time.perf_counter() - t0
 
     def _rounded_edges(self, rows, kc):
         """Circle fits across rounded thin edges (:mod:`~curvature.fitting.rounded_edge`) at

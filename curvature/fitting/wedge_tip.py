@@ -1,0 +1,380 @@
+"""Circle fits at the tip of a thin wedge: a blade's sharp trailing edge.
+
+Where the two faces of a thin wall converge at a small angle and meet in a rounded edge of a
+radius below a point spacing or two, no patch of the surface resolves the edge: a handful of
+points lie on its arc, each with noise of a fair share of its radius. The default's fits read
+it about flat (the bench's blade, trailing edge of k = 100 at 0.7 spacings: 0 to 1.4 at 0.1 %
+noise; docs/accuracy.md section 9, step 33), and so do the circles across rounded edges
+(:mod:`curvature.fitting.rounded_edge`), which need the arc itself sampled.
+
+The faces, though, are sampled well, and they fix the edge's radius: a circle of radius r
+tangent to two lines that meet at half-angle alpha has its centre r / sin(alpha) from their
+apex, so the tip ends r (1 / sin(alpha) - 1) short of it. The apex comes from the two faces'
+lines, each fitted to many points; where the tip ends, from every point around it. Across the
+edge, in the plane normal to its axis, this module fits that profile: two lines and the circle
+tangent to both (a facts-only use of elementary geometry; the least-squares line fits and the
+one-parameter fit of r are textbook).
+
+At a point p, over its :data:`WEDGE_K` nearest neighbors:
+
+1. the wall's mid-plane: the smallest principal axis of the neighbors' positions splits them
+   into the two faces; a plane fitted to each face, whose normals' cross product is the
+   edge's axis (faces within :data:`ALPHA_MIN` degrees of parallel are left to the rim fits);
+2. in the plane normal to the axis, the profile's direction toward the edge (p must lie at
+   its end), and a line fitted to each face's points at least :data:`BACK_SHARE` of the
+   profile's length behind its end;
+3. their apex, half-angle alpha (at most :data:`ALPHA_MAX`) and, over the points within
+   :data:`WINDOW_SHARE` of that length of the end, the radius r whose profile (the lines up
+   to where the circle touches them, the arc between) is nearest to the points;
+4. the fit is usable where its RMS distance is within :data:`FIT_NOISE` of the noise, each
+   face's line within :data:`SIDE_NOISE`, at least :data:`MIN_ARC` points lie on the arc,
+   and ``1 / r`` is at least :data:`SIGNIFICANCE` standard errors (from the radius's own fit
+   and from the apex's, through r = D sin(alpha) / (1 - sin(alpha)) with D the apex's
+   distance from the tip).
+
+A point reads the edge where it lies on the arc within :data:`ON_ARC_NOISE` noise.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, prange
+
+from .linalg import jacobi3
+
+__all__ = ["ALPHA_MAX", "ALPHA_MIN", "BACK_SHARE", "FIT_NOISE", "MIN_ARC", "MIN_SIDE",
+           "ON_ARC_NOISE", "PRE_K", "SIDE_NOISE", "SIGNIFICANCE", "WEDGE_K", "WINDOW_SHARE",
+           "wedge_tip_fits"]
+
+#: Neighbors of a point the profile is fitted to.
+WEDGE_K = 384
+#: Neighbors of the first test of the faces (step 1).
+PRE_K = 64
+#: Smallest half-angle between the faces (degrees): nearer parallel, the apex is far off and
+#: the rims' circle fits read the edge.
+ALPHA_MIN = 1.0
+#: Largest half-angle (degrees): a wider edge is no thin wall, and its arc is sampled.
+ALPHA_MAX = 35.0
+#: The faces' lines are fitted to the points at least this share of the profile's length
+#: behind its end (the arc and its tangency points lie well inside it).
+BACK_SHARE = 0.3
+#: The radius is fitted to the points within this share of the profile's length of its end.
+WINDOW_SHARE = 0.4
+#: Least points of each face's line.
+MIN_SIDE = 8
+#: Least points on the arc (between its tangency points).
+MIN_ARC = 3
+#: Largest RMS distance of a face's points to its line, in noise.
+SIDE_NOISE = 2.0
+#: Largest RMS distance of the window's points to the fitted profile, in noise.
+FIT_NOISE = 2.0
+#: Least ratio of the curvature to its standard error.
+SIGNIFICANCE = 4.0
+#: A point reads the edge within this many noise of its arc.
+ON_ARC_NOISE = 3.0
+_GRID = 24
+_GOLDEN = 40
+
+
+@njit(cache=True)
+def _smallest_axis(points, nbr, side, want, centre, mean, out):
+    """Smallest principal axis of the points of ``nbr`` whose ``side`` is ``want`` (all of
+    them where ``want`` is -1), written to ``out``, and their mean offset from ``centre`` to
+    ``mean``; returns how many points it used (nothing is written under 3)."""
+    m = 0
+    for c in range(3):
+        mean[c] = 0.0
+    for i in range(nbr.shape[0]):
+        if want < 0 or side[i] == want:
+            for c in range(3):
+                mean[c] += points[nbr[i], c] - centre[c]
+            m += 1
+    if m < 3:
+        return m
+    for c in range(3):
+        mean[c] /= m
+    cov = np.zeros((3, 3))
+    for i in range(nbr.shape[0]):
+        if want < 0 or side[i] == want:
+            for r in range(3):
+                dr = points[nbr[i], r] - centre[r] - mean[r]
+                for c in range(3):
+                    cov[r, c] += dr * (points[nbr[i], c] - centre[c] - mean[c])
+    vec = np.empty((3, 3))
+    i0, _, _ = jacobi3(cov, vec)
+    for c in range(3):
+        out[c] = vec[c, i0]
+    return m
+
+
+@njit(cache=True)
+def _line(u, v, use):
+    """Least-squares line ``v = a + b u`` over ``use``: (a, b, rms, var_a, var_b, cov_ab, m);
+    m = 0 where it is undetermined."""
+    m = 0
+    su = sv = suu = suv = 0.0
+    for i in range(u.shape[0]):
+        if use[i]:
+            m += 1
+            su += u[i]
+            sv += v[i]
+            suu += u[i] * u[i]
+            suv += u[i] * v[i]
+    det = m * suu - su * su
+    if m < MIN_SIDE or not det > 0.0:
+        return 0.0, 0.0, np.inf, np.inf, np.inf, 0.0, 0
+    b = (m * suv - su * sv) / det
+    a = (sv - b * su) / m
+    ss = 0.0
+    for i in range(u.shape[0]):
+        if use[i]:
+            d = v[i] - a - b * u[i]
+            ss += d * d
+    s2 = ss / max(m - 2, 1)
+    return a, b, np.sqrt(ss / m), s2 * suu / det, s2 * m / det, -s2 * su / det, m
+
+
+@njit(cache=True)
+def _profile_distance(x, y, r, sin_a, cos_a):
+    """Signed distance of (x, y) (x along the bisector from the apex into the wedge, y across
+    it) to the profile of radius r: the arc before its tangency points, the faces' lines
+    beyond; positive outside the material."""
+    ty = abs(y)
+    cx = r / sin_a
+    along = x * cos_a + ty * sin_a  # position along the face's line from the apex
+    if along < cx * cos_a:  # the tangency point: the centre's foot on the line
+        return np.hypot(x - cx, y) - r, True
+    return ty * cos_a - x * sin_a, False
+
+
+@njit(cache=True)
+def _misfit(x, y, near, r, sin_a, cos_a):
+    """Sum of squared distances of the ``near`` points to the profile of radius r."""
+    s = 0.0
+    for i in range(x.shape[0]):
+        if near[i]:
+            d, _ = _profile_distance(x[i], y[i], r, sin_a, cos_a)
+            s += d * d
+    return s
+
+
+@njit(cache=True)
+def _faces(points, nbr, m, centre, mean, thin, side, axis):
+    """The wall's two faces over ``nbr[:m]``: their mean offset from ``centre`` (``mean``),
+    the mid-plane's normal (``thin``), each point's face (``side``) and the edge's axis (the
+    cross product of the faces' plane normals), all written in place; returns the sine of
+    the angle between the faces, 0 where they are within :data:`ALPHA_MIN` of parallel or
+    either has fewer than :data:`MIN_SIDE` points."""
+    if _smallest_axis(points, nbr[:m], side[:m], -1, centre, mean, thin) < 3:
+        return 0.0
+    for i in range(m):
+        s = 0.0
+        for c in range(3):
+            s += (points[nbr[i], c] - centre[c] - mean[c]) * thin[c]
+        side[i] = 1 if s > 0.0 else 0
+    n1, n0, at = np.empty(3), np.empty(3), np.empty(3)
+    if _smallest_axis(points, nbr[:m], side[:m], 1, centre, at, n1) < MIN_SIDE or \
+            _smallest_axis(points, nbr[:m], side[:m], 0, centre, at, n0) < MIN_SIDE:
+        return 0.0
+    axis[0] = n1[1] * n0[2] - n1[2] * n0[1]
+    axis[1] = n1[2] * n0[0] - n1[0] * n0[2]
+    axis[2] = n1[0] * n0[1] - n1[1] * n0[0]
+    sa = np.sqrt(axis[0] ** 2 + axis[1] ** 2 + axis[2] ** 2)
+    if not sa >= np.sin(np.radians(2.0 * ALPHA_MIN)):
+        return 0.0
+    return sa
+
+
+@njit(cache=True)
+def _fit_one(points, p, nbr, noise, out):
+    """The wedge profile at ``p`` over ``nbr`` (module docstring): ``out`` = (k, standard
+    error, normal (3), across direction (3), axis (3)); returns whether usable."""
+    m = nbr.shape[0]
+    centre = points[p]
+    # 1. mid-plane and faces; on the first PRE_K neighbors first, which turns down most
+    # points (one sheet's two halves lie within ALPHA_MIN of parallel) at a sixth of the cost
+    mean, thin, axis = np.empty(3), np.empty(3), np.empty(3)
+    side = np.empty(m, np.int8)
+    if _faces(points, nbr, min(PRE_K, m), centre, mean, thin, side, axis) == 0.0:
+        return False
+    sa = _faces(points, nbr, m, centre, mean, thin, side, axis)
+    if sa == 0.0:
+        return False
+    axis /= sa
+    # 2. the profile plane: e1 along the wall (toward its end), e2 across it
+    e1 = np.array([axis[1] * thin[2] - axis[2] * thin[1], axis[2] * thin[0] - axis[0] * thin[2],
+                   axis[0] * thin[1] - axis[1] * thin[0]])
+    e1 /= np.sqrt(e1[0] ** 2 + e1[1] ** 2 + e1[2] ** 2)
+    if mean[0] * e1[0] + mean[1] * e1[1] + mean[2] * e1[2] > 0.0:
+        e1 = -e1  # the material lies behind p
+    e2 = np.array([axis[1] * e1[2] - axis[2] * e1[1], axis[2] * e1[0] - axis[0] * e1[2],
+                   axis[0] * e1[1] - axis[1] * e1[0]])
+    u, v = np.empty(m), np.empty(m)
+    for i in range(m):
+        su = sv = 0.0
+        for c in range(3):
+            d = points[nbr[i], c] - centre[c]
+            su += d * e1[c]
+            sv += d * e2[c]
+        u[i], v[i] = su, sv
+    first, second, low = -np.inf, -np.inf, np.inf
+    for i in range(m):
+        low = min(low, u[i])
+        if u[i] > first:
+            first, second = u[i], first
+        elif u[i] > second:
+            second = u[i]
+    end = second  # the second farthest: one noisy point does not set it
+    length = end - low
+    if not length > 0.0 or end > BACK_SHARE * length:
+        return False  # p lies far from the profile's end (whether on its arc: step 4)
+    back = u < end - BACK_SHARE * length
+    use1, use0 = back & (side == 1), back & (side == 0)
+    a1, b1, rms1, va1, vb1, cab1, m1 = _line(u, v, use1)
+    a0, b0, rms0, va0, vb0, cab0, m0 = _line(u, v, use0)
+    if m1 == 0 or m0 == 0 or rms1 > SIDE_NOISE * noise or rms0 > SIDE_NOISE * noise:
+        return False
+    # 3. apex and half-angle; the faces converge toward the end
+    if not b1 != b0:
+        return False
+    ua = (a0 - a1) / (b1 - b0)
+    va = a1 + b1 * ua
+    if not ua > end:
+        return False
+    t1 = np.array([1.0, b1]) / np.hypot(1.0, b1)
+    t0 = np.array([1.0, b0]) / np.hypot(1.0, b0)
+    cos2a = min(max(t1[0] * t0[0] + t1[1] * t0[1], -1.0), 1.0)
+    alpha = 0.5 * np.arccos(cos2a)
+    if alpha < np.radians(ALPHA_MIN) or alpha > np.radians(ALPHA_MAX):
+        return False
+    sin_a, cos_a = np.sin(alpha), np.cos(alpha)
+    bx, by = t1[0] + t0[0], t1[1] + t0[1]
+    nb = np.hypot(bx, by)
+    bx, by = bx / nb, by / nb  # bisector, toward the apex
+    x, y = np.empty(m), np.empty(m)
+    for i in range(m):
+        du, dv = u[i] - ua, v[i] - va
+        x[i] = -(du * bx + dv * by)
+        y[i] = -du * by + dv * bx
+    xmin = np.inf
+    for i in range(m):
+        xmin = min(xmin, x[i])
+    near = x < xmin + WINDOW_SHARE * length
+    # the radius: a grid over the sizes the window can hold, then golden-section search
+    r_hi = (xmin + WINDOW_SHARE * length) * sin_a
+    if not r_hi > 0.0:
+        return False
+    best_r, best_f = 0.0, np.inf
+    for g in range(1, _GRID + 1):
+        r = r_hi * g / _GRID
+        f = _misfit(x, y, near, r, sin_a, cos_a)
+        if f < best_f:
+            best_f, best_r = f, r
+    lo, hi = max(best_r - r_hi / _GRID, 1e-12 * r_hi), min(best_r + r_hi / _GRID, r_hi)
+    phi = 0.5 * (np.sqrt(5.0) - 1.0)
+    c1, c2 = hi - phi * (hi - lo), lo + phi * (hi - lo)
+    f1, f2 = _misfit(x, y, near, c1, sin_a, cos_a), _misfit(x, y, near, c2, sin_a, cos_a)
+    for _ in range(_GOLDEN):
+        if f1 < f2:
+            hi, c2, f2 = c2, c1, f1
+            c1 = hi - phi * (hi - lo)
+            f1 = _misfit(x, y, near, c1, sin_a, cos_a)
+        else:
+            lo, c1, f1 = c1, c2, f2
+            c2 = lo + phi * (hi - lo)
+            f2 = _misfit(x, y, near, c2, sin_a, cos_a)
+    r = 0.5 * (lo + hi)
+    if r >= r_hi * (1.0 - 0.5 / _GRID):
+        return False  # the window holds no end of the fitted size
+    # 4. usable?
+    count = 0
+    arc = 0
+    jj = 0.0
+    step = 1e-3 * r
+    for i in range(m):
+        if near[i]:
+            count += 1
+            d, on = _profile_distance(x[i], y[i], r, sin_a, cos_a)
+            arc += on
+            dp, _ = _profile_distance(x[i], y[i], r + step, sin_a, cos_a)
+            dm, _ = _profile_distance(x[i], y[i], r - step, sin_a, cos_a)
+            g = (dp - dm) / (2.0 * step)
+            jj += g * g
+    rms = np.sqrt(_misfit(x, y, near, r, sin_a, cos_a) / max(count - 1, 1))
+    if count < MIN_SIDE or arc < MIN_ARC or rms > FIT_NOISE * noise or not jj > 0.0:
+        return False
+    # the apex's error along the bisector, through r = D sin(alpha) / (1 - sin(alpha))
+    db = b1 - b0
+    g_a1, g_a0 = -1.0 / db, 1.0 / db
+    g_b1, g_b0 = -(a0 - a1) / (db * db), (a0 - a1) / (db * db)
+    var_ua = (g_a1 * g_a1 * va1 + g_b1 * g_b1 * vb1 + 2.0 * g_a1 * g_b1 * cab1
+              + g_a0 * g_a0 * va0 + g_b0 * g_b0 * vb0 + 2.0 * g_a0 * g_b0 * cab0)
+    var_r = rms * rms / jj + max(var_ua, 0.0) * (bx * bx) * (sin_a / (1.0 - sin_a)) ** 2
+    k = 1.0 / r
+    se = np.sqrt(var_r) / (r * r)
+    if not k >= SIGNIFICANCE * se:
+        return False
+    # p on the arc?
+    px, py = -(-ua * bx - va * by), ua * by - va * bx
+    d, on = _profile_distance(px, py, r, sin_a, cos_a)
+    if not on or abs(d) > ON_ARC_NOISE * noise:
+        return False
+    # normal: from the circle's centre through p (in 3D), outward
+    cx = r / sin_a
+    nx, ny = px - cx, py
+    nn = np.hypot(nx, ny)
+    if not nn > 0.0:
+        return False
+    nx, ny = nx / nn, ny / nn
+    # back to (u, v): x = -(du bx + dv by), y = -du by + dv bx
+    nu = -nx * bx - ny * by
+    nv = -nx * by + ny * bx
+    out[0], out[1] = k, se
+    for c in range(3):
+        out[2 + c] = nu * e1[c] + nv * e2[c]
+    normal = out[2:5]
+    across = np.array([axis[1] * normal[2] - axis[2] * normal[1],
+                       axis[2] * normal[0] - axis[0] * normal[2],
+                       axis[0] * normal[1] - axis[1] * normal[0]])
+    for c in range(3):
+        out[5 + c] = across[c]
+        out[8 + c] = axis[c]
+    return True
+
+
+@njit(parallel=True, cache=True)
+def wedge_tip_fits(points, query, nbr, noise, out):
+    """Wedge-tip fits at ``query`` (module docstring).
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+    query : ndarray, shape (m,), int64
+    nbr : ndarray, shape (m, k), int
+        Each point's nearest neighbors, nearest first; -1 marks one left out (an outlier).
+    noise : float
+        The cloud's noise (length unit).
+    out : ndarray, shape (m, 11)
+        Output: the edge's curvature 1 / r (NaN where no usable fit reads the point), its
+        standard error, the outward normal (3) at the point, the direction across the edge
+        (3) and the edge's axis (3).
+    """
+    for j in prange(query.shape[0]):
+        out[j, 0] = np.nan
+        row = nbr[j]
+        m = 0
+        for i in range(row.shape[0]):
+            if row[i] >= 0:
+                m += 1
+        if m < 4 * MIN_SIDE:
+            continue
+        use = np.empty(m, np.int64)
+        m = 0
+        for i in range(row.shape[0]):
+            if row[i] >= 0:
+                use[m] = row[i]
+                m += 1
+        buf = np.empty(11)
+        if _fit_one(points, query[j], use, noise, buf):
+            for c in range(11):
+                out[j, c] = buf[c]
