@@ -43,7 +43,7 @@ On noisy scans the neighborhood size decides the error far more than the fit mod
    ``|k| h > 1`` goes to the anchored fits.
 6. **Features the fits cannot resolve**, both branches at the end: sphere and cylinder fits
    where the points prefer them (noisy clouds, :mod:`.umbilic_pass`), and the tips of thin
-   wedges, whose radius the faces fix (:mod:`.wedge_tip_pass`).
+   wedges, whose radius the faces fix, and the faces beside them (:mod:`.wedge_tip_pass`).
 
 Everything depends on the points' coordinates only, never on their order, so the results are
 identical for any point order and any ``workers``.
@@ -1126,12 +1126,7 @@ class AutoRun:
         corners beside features, fillets), over at most ``kc`` neighbors (docs/accuracy.md
         section 9, steps 27 and 31), then the wedge tips (:meth:`_wedge_tips`)."""
         t0 = time.perf_counter()
-
-        def nearest(idx, k):
-            _, indices, d2 = knn_csr(self.points, self.tree, idx, k)
-            return indices.reshape(-1, k), d2
-
-        umbilic_pass(self.points, nearest, res, rows, self._noise(), kc, self.outliers,
+        umbilic_pass(self.points, self._nearest, res, rows, self._noise(), kc, self.outliers,
                      self.chunk_size, self.reach if self.track_reach else None,
                      1.0 / self.plan.spacing, self._grow_total, self._tick,
                      cylinders=~self.edge_read, own_std=self.own_std)
@@ -1139,17 +1134,17 @@ class AutoRun:
         self._wedge_tips(res, rows, kc, self._noise())
         self.tree = None
 
+    def _nearest(self, idx, k):
+        """The ``k`` nearest points of ``points[idx]``, nearest first: (nbr (m, k), d2 (m, k))."""
+        _, indices, d2 = knn_csr(self.points, self.tree, idx, k)
+        return indices.reshape(-1, k), d2
+
     def _wedge_tips(self, res, rows, kc, noise) -> None:
         """Fits at the tips of thin wedges (:mod:`~curvature.estimators.wedge_tip_pass`) at
         the rounded edges' candidates among ``rows``, over at most ``kc`` neighbors, with the
-        cloud's ``noise`` (docs/accuracy.md section 9, step 33)."""
+        cloud's ``noise`` (docs/accuracy.md section 9, steps 33 and 34)."""
         t0 = time.perf_counter()
-
-        def nearest(idx, k):
-            _, indices, d2 = knn_csr(self.points, self.tree, idx, k)
-            return indices.reshape(-1, k), d2
-
-        wedge_tip_pass(self.points, nearest, res, rows, noise, kc, self.outliers,
+        wedge_tip_pass(self.points, self._nearest, res, rows, noise, kc, self.outliers,
                        self.edge_candidates, self.chunk_size,
                        self.reach if self.track_reach else None, 1.0 / self.plan.spacing,
                        own_std=self.own_std)

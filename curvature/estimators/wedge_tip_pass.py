@@ -3,7 +3,8 @@
 After the umbilic pass, the points whose stage-1 neighborhoods are far from flat (the rounded
 edges' candidates) are tried for the tip of a thin wedge (:mod:`curvature.fitting.wedge_tip`).
 A usable fit replaces a point's estimate where that reads the edge flatter than the fit by
-more than :data:`DISAGREE` of the fit's standard errors (the bench's blade's trailing
+more than :data:`DISAGREE` of the fit's standard errors (a face beside the tip: where it
+reads the face more curved by as much) (the bench's blade's trailing
 edge, k = 100 at 0.7 spacings, read 0 to 1.4 before; docs/accuracy.md section 9, step 33).
 """
 
@@ -53,14 +54,17 @@ def wedge_tip_pass(points, query_nearest, res, rows, noise: float, largest: int,
         query = query_rows[start:start + chunk]
         nbr, d2 = query_nearest(query, k)
         nbr = np.where(outliers[nbr], -1, nbr)
-        out = np.empty((query.shape[0], 11))
+        out = np.empty((query.shape[0], 12))
         wedge_tip_fits(points, query, nbr, noise, out)
         if reach is not None:
             reach[query] = np.fmax(reach[query], np.sqrt(d2[:, -1]))
         ok = np.isfinite(out[:, 0])
         at, out = query[ok], out[ok]
         current = np.fmax(np.abs(res.k1[at]), np.abs(res.k2[at]))
-        flatter = (res.status[at] == 0) & (current < out[:, 0] - DISAGREE * out[:, 1])
+        face = out[:, 11] == 1.0
+        flatter = np.where(face, current > np.abs(out[:, 0]) + DISAGREE * out[:, 1],
+                           current < out[:, 0] - DISAGREE * out[:, 1])
+        flatter &= res.status[at] == 0
         _store(res, at[flatter], out[flatter], k, floor_scale)
         if own_std is not None:
             own_std[at[flatter]] = True
@@ -69,9 +73,9 @@ def wedge_tip_pass(points, query_nearest, res, rows, noise: float, largest: int,
 
 
 def _store(res, at, out, count: int, floor_scale: float) -> None:
-    """Write the wedge fits ``out`` (shape (r, 11), as
+    """Write the wedge fits ``out`` (shape (r, 12), as
     :func:`~curvature.fitting.wedge_tip.wedge_tip_fits` returns them) at ``at`` into
-    ``res``: the fit's outward normal, the edge's curvature across it and the estimate's
+    ``res``: the fit's outward normal, its curvature across the edge and the estimate's
     normal curvature along the edge's axis, ordered k1 >= k2 with their directions."""
     if at.size == 0:
         return

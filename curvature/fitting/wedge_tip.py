@@ -32,7 +32,11 @@ At a point p, over its :data:`WEDGE_K` nearest neighbors:
    and from the apex's, through r = D sin(alpha) / (1 - sin(alpha)) with D the apex's
    distance from the tip).
 
-A point reads the edge where it lies on the arc within :data:`ON_ARC_NOISE` noise.
+A point reads the edge where it lies on the arc within :data:`ON_ARC_NOISE` noise; a point of
+a face near the tip (as near as p is to the profile's end, step 2), at least
+:data:`FACE_MARGIN` noise beyond where the arc meets it, reads that face: its curvature across
+the edge from a parabola over the face's own points in the profile plane, and its normal
+(docs/accuracy.md section 9, step 34).
 """
 
 from __future__ import annotations
@@ -40,11 +44,11 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from .linalg import jacobi3
+from .linalg import cholesky, jacobi3, solve_lower, solve_upper_t
 
-__all__ = ["ALPHA_MAX", "ALPHA_MIN", "BACK_SHARE", "FIT_NOISE", "MIN_ARC", "MIN_SIDE",
-           "ON_ARC_NOISE", "PRE_K", "SIDE_NOISE", "SIGNIFICANCE", "WEDGE_K", "WINDOW_SHARE",
-           "wedge_tip_fits"]
+__all__ = ["ALPHA_MAX", "ALPHA_MIN", "BACK_SHARE", "FACE_MARGIN", "FIT_NOISE", "MIN_ARC",
+           "MIN_SIDE", "ON_ARC_NOISE", "PRE_K", "SIDE_NOISE", "SIGNIFICANCE", "WEDGE_K",
+           "WINDOW_SHARE", "wedge_tip_fits"]
 
 #: Neighbors of a point the profile is fitted to.
 WEDGE_K = 384
@@ -72,8 +76,13 @@ FIT_NOISE = 2.0
 SIGNIFICANCE = 4.0
 #: A point reads the edge within this many noise of its arc.
 ON_ARC_NOISE = 3.0
+#: A point of a face reads the face's own curvature where it lies at least this many noise
+#: beyond where the arc meets it.
+FACE_MARGIN = 1.0
 _GRID = 24
 _GOLDEN = 40
+#: A pivot of the face's parabola below this share of the largest counts as rank deficient.
+RANK_TOL = 1e-12
 
 
 @njit(cache=True)
@@ -135,6 +144,38 @@ def _line(u, v, use):
 
 
 @njit(cache=True)
+def _parabola(u, v, use):
+    """Least-squares ``v = a + b u + c u^2`` over ``use``: (b, c, var_c); var_c is inf where
+    it is undetermined."""
+    g = np.zeros((3, 3))
+    rhs = np.zeros(3)
+    m = 0
+    for i in range(u.shape[0]):
+        if use[i]:
+            m += 1
+            t = np.array([1.0, u[i], u[i] * u[i]])
+            for r in range(3):
+                rhs[r] += t[r] * v[i]
+                for c in range(3):
+                    g[r, c] += t[r] * t[c]
+    if m < MIN_SIDE:
+        return 0.0, 0.0, np.inf
+    low, ok = cholesky(g, RANK_TOL)
+    if not ok:
+        return 0.0, 0.0, np.inf
+    coef = solve_upper_t(low, solve_lower(low, rhs))
+    # (g^-1)[2, 2] = |L^-1 e_2|^2
+    e2 = solve_lower(low, np.array([0.0, 0.0, 1.0]))
+    ss = 0.0
+    for i in range(u.shape[0]):
+        if use[i]:
+            d = v[i] - coef[0] - coef[1] * u[i] - coef[2] * u[i] * u[i]
+            ss += d * d
+    s2 = ss / max(m - 3, 1)
+    return coef[1], coef[2], s2 * (e2[0] * e2[0] + e2[1] * e2[1] + e2[2] * e2[2])
+
+
+@njit(cache=True)
 def _profile_distance(x, y, r, sin_a, cos_a):
     """Signed distance of (x, y) (x along the bisector from the apex into the wedge, y across
     it) to the profile of radius r: the arc before its tangency points, the faces' lines
@@ -188,7 +229,8 @@ def _faces(points, nbr, m, centre, mean, thin, side, axis):
 @njit(cache=True)
 def _fit_one(points, p, nbr, noise, out):
     """The wedge profile at ``p`` over ``nbr`` (module docstring): ``out`` = (k, standard
-    error, normal (3), across direction (3), axis (3)); returns whether usable."""
+    error, normal (3), across direction (3), axis (3), 0 on the arc or 1 on a face);
+    returns whether usable."""
     m = nbr.shape[0]
     centre = points[p]
     # 1. mid-plane and faces; on the first PRE_K neighbors first, which turns down most
@@ -314,21 +356,37 @@ def _fit_one(points, p, nbr, noise, out):
     se = np.sqrt(var_r) / (r * r)
     if not k >= SIGNIFICANCE * se:
         return False
-    # p on the arc?
+    # p on the arc, or on a face beyond where the arc meets it?
     px, py = -(-ua * bx - va * by), ua * by - va * bx
     d, on = _profile_distance(px, py, r, sin_a, cos_a)
-    if not on or abs(d) > ON_ARC_NOISE * noise:
+    if abs(d) > ON_ARC_NOISE * noise:
         return False
-    # normal: from the circle's centre through p (in 3D), outward
     cx = r / sin_a
-    nx, ny = px - cx, py
-    nn = np.hypot(nx, ny)
-    if not nn > 0.0:
-        return False
-    nx, ny = nx / nn, ny / nn
-    # back to (u, v): x = -(du bx + dv by), y = -du by + dv bx
-    nu = -nx * bx - ny * by
-    nv = -nx * by + ny * bx
+    if on:  # normal: from the circle's centre through p, outward
+        nx, ny = px - cx, py
+        nn = np.hypot(nx, ny)
+        if not nn > 0.0:
+            return False
+        nx, ny = nx / nn, ny / nn
+        # back to (u, v): x = -(du bx + dv by), y = -du by + dv bx
+        nu = -nx * bx - ny * by
+        nv = -nx * by + ny * bx
+        out[11] = 0.0
+    else:
+        if px * cos_a + abs(py) * sin_a < cx * cos_a + FACE_MARGIN * noise:
+            return False  # within noise of where the arc meets the face
+        # p's face: the nearer line at p (u = 0); its outward side is away from the other
+        on1 = abs(a1) < abs(a0)
+        slope, bend, var_bend = _parabola(u, v, use1 if on1 else use0)
+        if not np.isfinite(var_bend):
+            return False
+        sgn = 1.0 if (a1 > a0) == on1 else -1.0  # +1 on the face with the larger v
+        w = (1.0 + slope * slope) ** 1.5  # (p is at u = 0)
+        k = -sgn * 2.0 * bend / w  # positive where the face bulges outward
+        se = 2.0 * np.sqrt(var_bend) / w
+        nn = np.hypot(slope, 1.0)
+        nu, nv = -sgn * slope / nn, sgn / nn
+        out[11] = 1.0
     out[0], out[1] = k, se
     for c in range(3):
         out[2 + c] = nu * e1[c] + nv * e2[c]
@@ -354,10 +412,11 @@ def wedge_tip_fits(points, query, nbr, noise, out):
         Each point's nearest neighbors, nearest first; -1 marks one left out (an outlier).
     noise : float
         The cloud's noise (length unit).
-    out : ndarray, shape (m, 11)
-        Output: the edge's curvature 1 / r (NaN where no usable fit reads the point), its
-        standard error, the outward normal (3) at the point, the direction across the edge
-        (3) and the edge's axis (3).
+    out : ndarray, shape (m, 12)
+        Output: the curvature across the edge (1 / r on the arc, the face's on a face; NaN
+        where no usable fit reads the point), its standard error, the outward normal (3) at
+        the point, the direction across the edge (3), the edge's axis (3), and 0 where the
+        point reads the arc, 1 where it reads a face.
     """
     for j in prange(query.shape[0]):
         out[j, 0] = np.nan
@@ -374,7 +433,7 @@ def wedge_tip_fits(points, query, nbr, noise, out):
             if row[i] >= 0:
                 use[m] = row[i]
                 m += 1
-        buf = np.empty(11)
+        buf = np.empty(12)
         if _fit_one(points, query[j], use, noise, buf):
-            for c in range(11):
+            for c in range(12):
                 out[j, c] = buf[c]
