@@ -20,9 +20,9 @@ At a point p, over its :data:`WEDGE_K` nearest neighbors:
 1. the wall's mid-plane: the smallest principal axis of the neighbors' positions splits them
    into the two faces; a plane fitted to each face, whose normals' cross product is the
    edge's axis (faces within :data:`ALPHA_MIN` degrees of parallel are left to the rim fits);
-2. in the plane normal to the axis, the profile's direction toward the edge (p must lie at
-   its end), and a line fitted to each face's points at least :data:`BACK_SHARE` of the
-   profile's length behind its end;
+2. in the plane normal to the axis, the profile's direction toward the edge (p must lie
+   within :data:`BACK_SHARE` of the profile's length of its end), and a line fitted to each
+   face's points at least that share behind the end;
 3. their apex, half-angle alpha (at most :data:`ALPHA_MAX`) and, over the points within
    :data:`WINDOW_SHARE` of that length of the end, the radius r whose profile (the lines up
    to where the circle touches them, the arc between) is nearest to the points;
