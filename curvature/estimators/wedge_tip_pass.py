@@ -88,12 +88,11 @@ def _store(res, at, out, count: int, floor_scale: float) -> None:
     c2 = np.sum(res.dir2[at] * axis, axis=1)
     k_axis = sign * np.nan_to_num(res.k1[at] * c1 * c1 + res.k2[at] * c2 * c2)
     s_axis = np.nan_to_num(np.fmax(res.k1_std[at], res.k2_std[at]))
-    k_across = k
-    first = k_across >= k_axis
+    first = k >= k_axis
     # right-handed (dir1, dir2, normal) either way
     along = np.cross(normal, across)
-    res.k1[at] = np.where(first, k_across, k_axis)
-    res.k2[at] = np.where(first, k_axis, k_across)
+    res.k1[at] = np.where(first, k, k_axis)
+    res.k2[at] = np.where(first, k_axis, k)
     res.dir1[at] = np.where(first[:, None], across, along)
     res.dir2[at] = np.where(first[:, None], along, -across)
     res.normals[at] = normal

@@ -12,7 +12,11 @@ from curvature import synthetic
 from curvature.orientation import (
     CHORD_CAP,
     CHORD_WEIGHT,
+    CIRCLE_TOL,
+    MIRROR_BELOW,
+    MIRROR_CIRCLE_BELOW,
     ORIENT_K,
+    _sign_agreement,
     forest_signs,
     reverse_edges,
     signs_auto,
@@ -100,6 +104,76 @@ def test_invalid_points_keep_their_sign_and_break_no_tree():
     assert np.all(signs[::7] == 1)
     ok = np.isfinite(normals).all(axis=1)
     assert np.all(signs[ok] == -1)
+
+
+def _sphere_polyhedron(vertices, graph_k):
+    """Points at the unit vectors ``vertices``, their outward normals, each joined to its
+    ``graph_k`` nearest others."""
+    points = np.asarray(vertices, float)
+    points /= np.linalg.norm(points, axis=1)[:, None]
+    return points, points.copy(), knn_graph(points, graph_k)
+
+
+@pytest.mark.parametrize("vertices, graph_k", [
+    # a tetrahedron's normals are 109.5 degrees apart (ni . nj = -1/3), a triangle's 120
+    ([[1, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]], 3),
+    ([[1, 0, 0], [-0.5, 0.75 ** 0.5, 0], [-0.5, -(0.75 ** 0.5), 0]], 2),
+])
+def test_normals_far_apart_keep_their_signs_by_the_mirror(vertices, graph_k):
+    """Beyond 90 degrees ni . nj calls consistent normals opposite; mirrored across the
+    plane bisecting the chord, the normals of two points of a circle or sphere coincide."""
+    points, normals, graph = _sphere_polyhedron(vertices, graph_k)
+    assert (normals @ normals.T)[~np.eye(len(points), dtype=bool)].max() < 0.0
+    for flips in ([1, 1, 1, 1], [1, -1, 1, -1], [-1, -1, 1, 1]):
+        flips = np.array(flips[:len(points)], float)
+        signs = signs_auto(points, normals * flips[:, None], graph)
+        np.testing.assert_array_equal(signs, flips.astype(np.int8))
+
+
+def _agreement(a, b, chord):
+    return _sign_agreement(*a, *b, *chord)
+
+
+@pytest.mark.parametrize("turn_deg", [30.0, 60.0, 100.0, 140.0, 150.0])
+def test_two_points_of_a_circle_agree_however_far_their_normals_turn(turn_deg):
+    t = np.radians(turn_deg)
+    a, b = np.array([0.0, 0.0, 1.0]), np.array([np.sin(t), 0.0, np.cos(t)])
+    chord = b - a  # the points of a unit circle whose normals they are
+    assert _agreement(a, b, chord) > 0.0
+    assert _agreement(a, -b, chord) < 0.0
+    if turn_deg > 90.0:
+        assert a @ b < 0.0  # which ni . nj alone would call opposite
+
+
+def test_a_chord_off_the_circle_leaves_the_sign_to_the_dot_product():
+    """Normals 30 degrees apart (between the thresholds), the chord 33 degrees from one of
+    them as between a surface and one behind it (PCL's milk scene had such an edge): no
+    circle through both points has these normals, so ni . nj decides, and the mirror (which
+    would say opposite) does not."""
+    t = np.radians(30.0)
+    a, b = np.array([0.0, 0.0, 1.0]), np.array([np.sin(t), 0.0, np.cos(t)])
+    chord = -b + [0.0, 0.65, 0.0]
+    assert MIRROR_BELOW <= a @ b < MIRROR_CIRCLE_BELOW
+    along = (a @ chord) * (b @ chord) / (chord @ chord)
+    assert min(abs(along + (1 - a @ b) / 2), abs(along - (1 + a @ b) / 2)) > CIRCLE_TOL
+    assert a @ b - 2 * along < 0.0
+    assert _agreement(a, b, chord) > 0.0
+    assert _agreement(a, -b, chord) < 0.0
+
+
+def test_near_parallel_normals_keep_their_own_dot_product():
+    """Two planes one behind the other, facing the same way as in a single view, joined by
+    chords along their normals: the mirror would call them opposite; within 46 degrees
+    ni . nj decides, so both keep the sign they share."""
+    rng = np.random.default_rng(5)
+    front = np.column_stack([rng.uniform(0, 1, (2, 200)).T, np.full(200, 0.05)])
+    back = front + [0.0, 0.0, -0.05]
+    points = np.vstack([front, back])
+    normals = np.tile([0.0, 0.3, 1.0], (400, 1)) / np.hypot(0.3, 1.0)
+    flips = rng.choice([-1.0, 1.0], 400)
+    signs = signs_auto(points, normals * flips[:, None], knn_graph(points))
+    relative = (signs * flips).astype(int)
+    assert np.all(relative == relative[0])
 
 
 def test_one_viewpoint_per_point():
