@@ -43,7 +43,8 @@ On noisy scans the neighborhood size decides the error far more than the fit mod
    ``|k| h > 1`` goes to the anchored fits.
 6. **Features the fits cannot resolve**, both branches at the end: sphere and cylinder fits
    where the points prefer them (noisy clouds, :mod:`.umbilic_pass`), and the tips of thin
-   wedges, whose radius the faces fix, and the faces beside them (:mod:`.wedge_tip_pass`).
+   wedges and the rounded ends of walls, whose radius the faces fix, and the faces beside
+   them (:mod:`.wedge_tip_pass`).
 
 Everything depends on the points' coordinates only, never on their order, so the results are
 identical for any point order and any ``workers``.

@@ -6,6 +6,8 @@ A usable fit replaces a point's estimate where that reads the edge flatter than 
 more than :data:`DISAGREE` of the fit's standard errors (a face beside the tip: where it
 reads the face more curved by as much) (the bench's blade's trailing
 edge, k = 100 at 0.7 spacings, read 0 to 1.4 before; docs/accuracy.md section 9, step 33).
+A wall whose faces run parallel is read the same way at its rounded end (the bench's thin
+plate's rims, step 36).
 """
 
 from __future__ import annotations
