@@ -44,6 +44,24 @@ MIRROR_CIRCLE_BELOW = 0.9
 #: for consistent signs or ``(1 + ni . nj) / 2`` for opposite ones (u the unit chord), for
 #: the chord to count as a circle's.
 CIRCLE_TOL = 0.15
+#: A tree edge whose chord runs within 37 degrees of both normals (``|u . n|`` at least this
+#: at both ends) joins a thin wall's two faces or two surfaces one behind the other, and no
+#: local rule tells them apart: the chord is a circle's diameter either way. The forest takes
+#: such an edge where its other paths turn more (a 0.25 % noisy thin plate's rims), so the
+#: subtree hanging from it is checked against the graph's other edges across the same cut
+#: (:func:`repair_cuts`).
+SUSPECT_ALONG = 0.8
+#: Such a subtree is flipped where the other edges across its cut disagree with its sign by
+#: this many times the weight of those that agree, the suspect edge itself among the latter.
+#: An edge weighs ``|agreement|`` (:func:`_sign_agreement`) times ``1 - |u . ni| |u . nj|``:
+#: the more its chord runs along its normals, the less it can tell a wall from surfaces one
+#: behind the other.
+REPAIR_MAJORITY = 3.0
+#: and by at least this weight in all (a few edges' word against one).
+REPAIR_MIN = 4.0
+#: At most this many subtrees are flipped (the largest disagreement first, the votes counted
+#: again after each).
+REPAIR_ROUNDS = 4
 
 
 def signs_from_normals(est: np.ndarray, given: np.ndarray) -> np.ndarray:
@@ -102,7 +120,9 @@ def signs_auto(points: np.ndarray, est: np.ndarray, graph: np.ndarray) -> np.nda
 
     The graph joins each point to its first neighbors (both ways) with weight 1 - |ni . nj|,
     so the forest prefers edges between nearly parallel normals, where a flip is unambiguous
-    (Hoppe et al., SIGGRAPH 1992). Each tree's overall sign is the one under which its
+    (Hoppe et al., SIGGRAPH 1992). Subtrees hanging from an edge across a thin wall are
+    checked against the graph's other edges across the same cut (:func:`repair_cuts`). Each
+    tree's overall sign is the one under which its
     normals point away from its centroid on balance (sum of n . (p - centroid) positive):
     outward on closed surfaces, towards the scanner on a single range scan bulging at it.
     The forest is grown by Prim's algorithm straight on the neighbor table, so memory stays
@@ -123,8 +143,11 @@ def signs_auto(points: np.ndarray, est: np.ndarray, graph: np.ndarray) -> np.nda
     valid = np.isfinite(est).all(axis=1)
     rev_ptr, rev_idx = reverse_edges(graph, valid)
     parent, order, count = spanning_forest(points, graph, rev_ptr, rev_idx, est, valid)
+    order = order[:count]
+    rel = relative_signs(points, est, parent, order)
+    repair_cuts(points, est, graph, rev_ptr, rev_idx, valid, parent, order, rel)
     del rev_ptr, rev_idx
-    return forest_signs(points, est, parent, order[:count])
+    return outward_signs(points, est, parent, order, rel)
 
 
 @njit(cache=True)
@@ -321,14 +344,52 @@ def spanning_forest(points, graph, rev_ptr, rev_idx, est, valid):
     return parent, order, count
 
 
-@njit(cache=True)
 def forest_signs(points, est, parent, order):
-    """Signs of every point from the forest: consistent along edges, outward on balance.
+    """Signs of every point from the forest: consistent along edges, outward on balance
+    (:func:`relative_signs`, then :func:`outward_signs`; no cut is repaired).
 
-    Signs follow each tree from its root, each point's relative to its parent's by
+    Returns
+    -------
+    ndarray, shape (n,), int8
+        +1 or -1 per point; invalid points keep +1.
+    """
+    return outward_signs(points, est, parent, order, relative_signs(points, est, parent, order))
+
+
+@njit(cache=True)
+def relative_signs(points, est, parent, order):
+    """Each point's sign relative to its tree's root: its parent's, times the edge's flip by
     :func:`_sign_agreement` (two points keep relative signs that agree with the product of
-    edge flips between them); the tree is then flipped as a whole if the sum of
-    n . (p - centroid) over its points is negative.
+    edge flips between them).
+
+    Parameters
+    ----------
+    points, est : ndarray, shape (n, 3)
+    parent, order : ndarray, shapes (n,) and (m,), int32
+        The forest (:func:`spanning_forest`; ``order`` its first ``count`` entries).
+
+    Returns
+    -------
+    ndarray, shape (n,), int8
+        +1 or -1; +1 at the roots and the points out of the forest.
+    """
+    rel = np.ones(points.shape[0], np.int8)
+    for t in range(order.shape[0]):
+        i = order[t]
+        p = parent[i]
+        if p < 0:
+            continue
+        agree = _sign_agreement(est[i, 0], est[i, 1], est[i, 2], est[p, 0], est[p, 1],
+                                est[p, 2], points[p, 0] - points[i, 0],
+                                points[p, 1] - points[i, 1], points[p, 2] - points[i, 2])
+        rel[i] = rel[p] if agree >= 0.0 else -rel[p]
+    return rel
+
+
+@njit(cache=True)
+def outward_signs(points, est, parent, order, rel):
+    """Signs from the relative signs ``rel`` (n,), each tree flipped as a whole where the
+    sum of rel n . (p - centroid) over its points is negative: outward on balance.
 
     Returns
     -------
@@ -337,7 +398,6 @@ def forest_signs(points, est, parent, order):
     """
     n = points.shape[0]
     m = order.shape[0]
-    rel = np.ones(n, np.int8)  # sign relative to the tree's root
     tree = np.full(n, -1, np.int32)
     n_trees = 0
     for t in range(m):
@@ -346,12 +406,8 @@ def forest_signs(points, est, parent, order):
         if p < 0:
             tree[i] = n_trees
             n_trees += 1
-            continue
-        tree[i] = tree[p]
-        agree = _sign_agreement(est[i, 0], est[i, 1], est[i, 2], est[p, 0], est[p, 1],
-                                est[p, 2], points[p, 0] - points[i, 0],
-                                points[p, 1] - points[i, 1], points[p, 2] - points[i, 2])
-        rel[i] = rel[p] if agree >= 0.0 else -rel[p]
+        else:
+            tree[i] = tree[p]
     cent = np.zeros((n_trees, 3))
     size = np.zeros(n_trees)
     for t in range(m):
@@ -380,6 +436,195 @@ def forest_signs(points, est, parent, order):
         i = order[t]
         sign[i] = rel[i] * flip[tree[i]]
     return sign
+
+
+@njit(cache=True)
+def _suspects(points, est, parent, order):
+    """Whether each point's tree edge to its parent runs along both normals
+    (:data:`SUSPECT_ALONG`), shape (n,), bool."""
+    out = np.zeros(points.shape[0], np.bool_)
+    for t in range(order.shape[0]):
+        i = order[t]
+        p = parent[i]
+        if p < 0:
+            continue
+        dd = 0.0
+        ai = ap = 0.0
+        for c in range(3):
+            d = points[p, c] - points[i, c]
+            dd += d * d
+            ai += d * est[i, c]
+            ap += d * est[p, c]
+        if dd > 0.0:
+            lim = SUSPECT_ALONG * SUSPECT_ALONG * dd
+            out[i] = ai * ai >= lim and ap * ap >= lim
+    return out
+
+
+@njit(cache=True, inline="always")
+def _along(a, b, d):
+    """``|u . a| |u . b|`` of the unit chord u = d / |d| (0 where d is 0), at most 1."""
+    dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
+    if not dd > 0.0:
+        return 0.0
+    return min(abs(d[0] * a[0] + d[1] * a[1] + d[2] * a[2])
+               * abs(d[0] * b[0] + d[1] * b[1] + d[2] * b[2]) / dd, 1.0)
+
+
+@njit(cache=True)
+def _find(root, i):
+    """Union-find root of ``i``, halving the path on the way."""
+    while root[i] != i:
+        root[i] = root[root[i]]
+        i = root[i]
+    return i
+
+
+def _children(parent, order):
+    """CSR lists of each point's children in the forest, in the order they joined it:
+    (kid_ptr (n + 1,) int64, kids int32)."""
+    child = order[parent[order] >= 0]
+    kids = child[np.argsort(parent[child], kind="stable")].astype(np.int32)
+    kid_ptr = np.zeros(parent.shape[0] + 1, np.int64)
+    np.cumsum(np.bincount(parent[child], minlength=parent.shape[0]), out=kid_ptr[1:])
+    return kid_ptr, kids
+
+
+@njit(cache=True)
+def _cut_votes(points, est, graph, rev_ptr, rev_idx, valid, parent, order, kid_ptr, kids,
+               rel):
+    """Weight of the graph's edges across each tree edge's cut that agree and that disagree
+    with the signs ``rel``, and the forest's depth-first order.
+
+    Every edge (i, j) lies on one tree, and crosses exactly the tree edges on the tree path
+    from i to j: its weight goes to i and j and twice off their lowest common ancestor
+    (Tarjan's offline algorithm, with the graph's edges as its queries), so that the sum
+    over a point's subtree is the weight across the cut above it.
+
+    Parameters
+    ----------
+    points, est, graph, rev_ptr, rev_idx, valid, parent, order
+        As for :func:`repair_cuts`.
+    kid_ptr, kids : ndarray, int64 and int32
+        Each point's children (:func:`_children`).
+    rel : ndarray, shape (n,), int8
+        The signs the edges are weighed against.
+
+    Returns
+    -------
+    agree, disagree : ndarray, shape (n,)
+        At each point, the weight across the cut between its subtree and the rest.
+    dfs, first, last : ndarray, shapes (m,), (n,) and (n,), int32
+        The points in depth-first order; a point's subtree is ``dfs[first[i]:last[i]]``.
+    """
+    n, k = graph.shape
+    m = order.shape[0]
+    root = np.arange(n).astype(np.int32)  # union-find
+    anc = np.arange(n).astype(np.int32)  # ancestor of each union-find set
+    black = np.zeros(n, np.bool_)
+    agree = np.zeros(n)
+    disagree = np.zeros(n)
+    dfs = np.empty(m, np.int32)
+    first = np.zeros(n, np.int32)
+    last = np.zeros(n, np.int32)
+    stack = np.empty(m, np.int32)
+    nxt = kid_ptr[:-1].copy()  # each point's next child to visit
+    seen = 0
+    for t in range(m):
+        r = order[t]
+        if parent[r] >= 0:
+            continue
+        top = 0
+        stack[0] = r
+        first[r] = seen
+        dfs[seen] = r
+        seen += 1
+        while top >= 0:
+            u = stack[top]
+            if nxt[u] < kid_ptr[u + 1]:
+                v = kids[nxt[u]]
+                nxt[u] += 1
+                top += 1
+                stack[top] = v
+                first[v] = seen
+                dfs[seen] = v
+                seen += 1
+                continue
+            top -= 1
+            last[u] = seen
+            black[u] = True
+            # the edges of u whose other end is done already: each edge once, at the later
+            # end (a mutual one from its row, a one-way one from its row or reverse list)
+            for e in range(k + rev_ptr[u + 1] - rev_ptr[u]):
+                v = graph[u, e] if e < k else rev_idx[rev_ptr[u] + e - k]
+                if v < 0 or v == u or not valid[v] or not black[v]:
+                    continue
+                a = anc[_find(root, v)]
+                val = _sign_agreement(est[u, 0], est[u, 1], est[u, 2], est[v, 0], est[v, 1],
+                                      est[v, 2], points[v, 0] - points[u, 0],
+                                      points[v, 1] - points[u, 1], points[v, 2] - points[u, 2])
+                w = min(abs(val), 1.0) * (1.0 - _along(est[u], est[v], points[v] - points[u]))
+                if (val >= 0.0) == (rel[u] == rel[v]):
+                    agree[u] += w
+                    agree[v] += w
+                    agree[a] -= 2.0 * w
+                else:
+                    disagree[u] += w
+                    disagree[v] += w
+                    disagree[a] -= 2.0 * w
+            p = parent[u]
+            if p >= 0:
+                root[_find(root, u)] = _find(root, p)
+                anc[_find(root, p)] = p
+    for t in range(m - 1, -1, -1):
+        i = order[t]
+        p = parent[i]
+        if p >= 0:
+            agree[p] += agree[i]
+            disagree[p] += disagree[i]
+    return agree, disagree, dfs, first, last
+
+
+def repair_cuts(points, est, graph, rev_ptr, rev_idx, valid, parent, order, rel) -> int:
+    """Flip, in ``rel`` (n,), the subtrees hanging from a suspect tree edge
+    (:data:`SUSPECT_ALONG`) whose cut the graph's other edges disagree with
+    (:data:`REPAIR_MAJORITY`, :data:`REPAIR_MIN`), at most :data:`REPAIR_ROUNDS` of them.
+
+    A thin wall's two faces are joined by the rim's edges and, where noise brings them within
+    a few nearest neighbors, across the wall; surfaces one behind the other in a single view
+    by edges along the view alone, which agree with the suspect edge, so they keep its sign.
+
+    Parameters
+    ----------
+    points, est : ndarray, shape (n, 3)
+    graph, rev_ptr, rev_idx, valid
+        As for :func:`spanning_forest`.
+    parent, order : ndarray, int32
+        The forest (``order`` its first ``count`` entries).
+    rel : ndarray, shape (n,), int8
+        Signs relative to each tree's root (:func:`relative_signs`), changed in place.
+
+    Returns
+    -------
+    int
+        How many subtrees were flipped.
+    """
+    suspect = _suspects(points, est, parent, order)
+    if not suspect.any():
+        return 0
+    kids = _children(parent, order)
+    flipped = 0
+    for _ in range(REPAIR_ROUNDS):
+        agree, disagree, dfs, first, last = _cut_votes(points, est, graph, rev_ptr, rev_idx,
+                                                       valid, parent, order, *kids, rel)
+        wrong = suspect & (disagree >= REPAIR_MAJORITY * agree) & (disagree >= REPAIR_MIN)
+        if not wrong.any():
+            break
+        at = np.flatnonzero(wrong)
+        i = at[np.argmax(disagree[at] - agree[at])]
+        rel[dfs[first[i]:last[i]]] *= -1
+        flipped += 1
+    return flipped
 
 
 def apply_signs(signs, k1, k2, normals, dir1, dir2) -> None:

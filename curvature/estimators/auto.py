@@ -434,6 +434,12 @@ def knn_csr(points: np.ndarray, tree: tuple, idx: np.ndarray, k: int):
     return np.arange(0, (m + 1) * k, k, dtype=np.int64), nbr.ravel(), d2
 
 
+#: Residuals beyond this many robust standard deviations are left out of the noise's cubic
+#: fits (a thin wall's other face within a point's 24 nearest; :func:`cubic_noise`).
+TRIM_SIGMA = 4.0
+TRIM_ROUNDS = 2
+
+
 def cubic_noise(points: np.ndarray, sample: np.ndarray, nbr: np.ndarray) -> np.ndarray:
     """RMS residual of a cubic height function over each sample's neighbors.
 
@@ -481,9 +487,27 @@ def cubic_noise(points: np.ndarray, sample: np.ndarray, nbr: np.ndarray) -> np.n
         if solvable.any():
             solvable[solvable] = np.linalg.cond(gram[solvable]) < 1e12
         if solvable.any():
+            design, height = design[solvable], height[solvable]
             coef = np.linalg.solve(gram[solvable], rhs[solvable][..., None])[..., 0]
-            resid = height[solvable] - np.einsum("mki,mi->mk", design[solvable], coef)
-            dof = local.shape[1] - design.shape[-1]
+            keep = np.ones(height.shape, bool)
+            for _ in range(TRIM_ROUNDS):
+                resid = height - np.einsum("mki,mi->mk", design, coef)
+                # (1.4826 median |r|: the standard deviation of Gaussian residuals)
+                scale = 1.4826 * np.median(np.abs(np.where(keep, resid, np.nan)), axis=1)
+                keep = np.abs(resid) <= TRIM_SIGMA * scale[:, None]
+                refit = (~keep).any(axis=1) & (keep.sum(axis=1) > design.shape[-1] + 2)
+                if not refit.any():
+                    break
+                keep[~refit] = True
+                w = design[refit] * keep[refit][..., None]
+                g = np.einsum("mki,mkj->mij", w, design[refit])
+                ok = np.linalg.cond(g) < 1e12
+                sub = np.flatnonzero(refit)[ok]
+                keep[np.flatnonzero(refit)[~ok]] = True
+                coef[sub] = np.linalg.solve(
+                    g[ok], np.einsum("mki,mk->mi", w[ok], height[sub])[..., None])[..., 0]
+            resid = np.where(keep, height - np.einsum("mki,mi->mk", design, coef), 0.0)
+            dof = np.maximum(keep.sum(axis=1) - design.shape[-1], 1)
             rms[rows[solvable]] = (np.sqrt(np.sum(resid * resid, axis=1) / dof)
                                    * size[rows[solvable]])
     return rms
