@@ -143,10 +143,10 @@ def signs_auto(points: np.ndarray, est: np.ndarray, graph: np.ndarray) -> np.nda
     valid = np.isfinite(est).all(axis=1)
     rev_ptr, rev_idx = reverse_edges(graph, valid)
     parent, order, count = spanning_forest(points, graph, rev_ptr, rev_idx, est, valid)
+    del rev_ptr, rev_idx
     order = order[:count]
     rel = relative_signs(points, est, parent, order)
-    repair_cuts(points, est, graph, rev_ptr, rev_idx, valid, parent, order, rel)
-    del rev_ptr, rev_idx
+    repair_cuts(points, est, graph, valid, parent, order, rel)
     return outward_signs(points, est, parent, order, rel)
 
 
@@ -461,16 +461,6 @@ def _suspects(points, est, parent, order):
     return out
 
 
-@njit(cache=True, inline="always")
-def _along(a, b, d):
-    """``|u . a| |u . b|`` of the unit chord u = d / |d| (0 where d is 0), at most 1."""
-    dd = d[0] * d[0] + d[1] * d[1] + d[2] * d[2]
-    if not dd > 0.0:
-        return 0.0
-    return min(abs(d[0] * a[0] + d[1] * a[1] + d[2] * a[2])
-               * abs(d[0] * b[0] + d[1] * b[1] + d[2] * b[2]) / dd, 1.0)
-
-
 @njit(cache=True)
 def _find(root, i):
     """Union-find root of ``i``, halving the path on the way."""
@@ -482,30 +472,33 @@ def _find(root, i):
 
 def _children(parent, order):
     """CSR lists of each point's children in the forest, in the order they joined it:
-    (kid_ptr (n + 1,) int64, kids int32)."""
+    (kid_ptr (n + 1,), kids), both int32."""
     child = order[parent[order] >= 0]
     kids = child[np.argsort(parent[child], kind="stable")].astype(np.int32)
-    kid_ptr = np.zeros(parent.shape[0] + 1, np.int64)
+    kid_ptr = np.zeros(parent.shape[0] + 1, np.int32)
     np.cumsum(np.bincount(parent[child], minlength=parent.shape[0]), out=kid_ptr[1:])
     return kid_ptr, kids
 
 
 @njit(cache=True)
-def _cut_votes(points, est, graph, rev_ptr, rev_idx, valid, parent, order, kid_ptr, kids,
-               rel):
+def _cut_votes(points, est, graph, valid, parent, order, kid_ptr, kids, rel):
     """Weight of the graph's edges across each tree edge's cut that agree and that disagree
-    with the signs ``rel``, and the forest's depth-first order.
+    with the signs ``rel``.
 
     Every edge (i, j) lies on one tree, and crosses exactly the tree edges on the tree path
-    from i to j: its weight goes to i and j and twice off their lowest common ancestor
-    (Tarjan's offline algorithm, with the graph's edges as its queries), so that the sum
-    over a point's subtree is the weight across the cut above it.
+    from i to j: its weight goes to i and j and twice off their lowest common ancestor, so
+    that the sum over a point's subtree is the weight across the cut above it. The ancestors
+    come from Tarjan's offline algorithm: in a depth-first walk, a point done is joined to
+    its parent's set, so the set of a point done earlier is named by the lowest ancestor not
+    yet done. An edge is read at its later end from that end's row, so a one-way edge whose
+    row's point is done first is left out: no reverse lists (the votes need not be complete,
+    and a big run's memory peaks at the orientation).
 
     Parameters
     ----------
-    points, est, graph, rev_ptr, rev_idx, valid, parent, order
+    points, est, graph, valid, parent, order
         As for :func:`repair_cuts`.
-    kid_ptr, kids : ndarray, int64 and int32
+    kid_ptr, kids : ndarray, int32
         Each point's children (:func:`_children`).
     rel : ndarray, shape (n,), int8
         The signs the edges are weighed against.
@@ -514,56 +507,47 @@ def _cut_votes(points, est, graph, rev_ptr, rev_idx, valid, parent, order, kid_p
     -------
     agree, disagree : ndarray, shape (n,)
         At each point, the weight across the cut between its subtree and the rest.
-    dfs, first, last : ndarray, shapes (m,), (n,) and (n,), int32
-        The points in depth-first order; a point's subtree is ``dfs[first[i]:last[i]]``.
     """
     n, k = graph.shape
     m = order.shape[0]
     root = np.arange(n).astype(np.int32)  # union-find
-    anc = np.arange(n).astype(np.int32)  # ancestor of each union-find set
-    black = np.zeros(n, np.bool_)
+    done = np.zeros(n, np.bool_)
     agree = np.zeros(n)
     disagree = np.zeros(n)
-    dfs = np.empty(m, np.int32)
-    first = np.zeros(n, np.int32)
-    last = np.zeros(n, np.int32)
     stack = np.empty(m, np.int32)
     nxt = kid_ptr[:-1].copy()  # each point's next child to visit
-    seen = 0
     for t in range(m):
         r = order[t]
         if parent[r] >= 0:
             continue
         top = 0
         stack[0] = r
-        first[r] = seen
-        dfs[seen] = r
-        seen += 1
         while top >= 0:
             u = stack[top]
             if nxt[u] < kid_ptr[u + 1]:
-                v = kids[nxt[u]]
-                nxt[u] += 1
                 top += 1
-                stack[top] = v
-                first[v] = seen
-                dfs[seen] = v
-                seen += 1
+                stack[top] = kids[nxt[u]]
+                nxt[u] += 1
                 continue
             top -= 1
-            last[u] = seen
-            black[u] = True
-            # the edges of u whose other end is done already: each edge once, at the later
-            # end (a mutual one from its row, a one-way one from its row or reverse list)
-            for e in range(k + rev_ptr[u + 1] - rev_ptr[u]):
-                v = graph[u, e] if e < k else rev_idx[rev_ptr[u] + e - k]
-                if v < 0 or v == u or not valid[v] or not black[v]:
+            done[u] = True
+            for e in range(k):
+                v = graph[u, e]
+                if v < 0 or v == u or not valid[v] or not done[v]:
                     continue
-                a = anc[_find(root, v)]
+                a = _find(root, v)
+                d0 = points[v, 0] - points[u, 0]
+                d1 = points[v, 1] - points[u, 1]
+                d2 = points[v, 2] - points[u, 2]
                 val = _sign_agreement(est[u, 0], est[u, 1], est[u, 2], est[v, 0], est[v, 1],
-                                      est[v, 2], points[v, 0] - points[u, 0],
-                                      points[v, 1] - points[u, 1], points[v, 2] - points[u, 2])
-                w = min(abs(val), 1.0) * (1.0 - _along(est[u], est[v], points[v] - points[u]))
+                                      est[v, 2], d0, d1, d2)
+                dd = d0 * d0 + d1 * d1 + d2 * d2
+                along = 0.0
+                if dd > 0.0:
+                    along = min(abs(d0 * est[u, 0] + d1 * est[u, 1] + d2 * est[u, 2])
+                                * abs(d0 * est[v, 0] + d1 * est[v, 1] + d2 * est[v, 2]) / dd,
+                                1.0)
+                w = min(abs(val), 1.0) * (1.0 - along)
                 if (val >= 0.0) == (rel[u] == rel[v]):
                     agree[u] += w
                     agree[v] += w
@@ -572,20 +556,32 @@ def _cut_votes(points, est, graph, rev_ptr, rev_idx, valid, parent, order, kid_p
                     disagree[u] += w
                     disagree[v] += w
                     disagree[a] -= 2.0 * w
-            p = parent[u]
-            if p >= 0:
-                root[_find(root, u)] = _find(root, p)
-                anc[_find(root, p)] = p
+            if parent[u] >= 0:
+                root[u] = parent[u]  # u's set was named u: its children were joined to it
     for t in range(m - 1, -1, -1):
         i = order[t]
         p = parent[i]
         if p >= 0:
             agree[p] += agree[i]
             disagree[p] += disagree[i]
-    return agree, disagree, dfs, first, last
+    return agree, disagree
 
 
-def repair_cuts(points, est, graph, rev_ptr, rev_idx, valid, parent, order, rel) -> int:
+@njit(cache=True)
+def _flip_subtree(parent, order, rel, top):
+    """Negate ``rel`` over the subtree of ``top`` (``order``: parents before children)."""
+    inside = np.zeros(parent.shape[0], np.bool_)
+    inside[top] = True
+    rel[top] = -rel[top]
+    for t in range(order.shape[0]):
+        i = order[t]
+        p = parent[i]
+        if p >= 0 and inside[p] and i != top:
+            inside[i] = True
+            rel[i] = -rel[i]
+
+
+def repair_cuts(points, est, graph, valid, parent, order, rel) -> int:
     """Flip, in ``rel`` (n,), the subtrees hanging from a suspect tree edge
     (:data:`SUSPECT_ALONG`) whose cut the graph's other edges disagree with
     (:data:`REPAIR_MAJORITY`, :data:`REPAIR_MIN`), at most :data:`REPAIR_ROUNDS` of them.
@@ -597,7 +593,7 @@ def repair_cuts(points, est, graph, rev_ptr, rev_idx, valid, parent, order, rel)
     Parameters
     ----------
     points, est : ndarray, shape (n, 3)
-    graph, rev_ptr, rev_idx, valid
+    graph, valid
         As for :func:`spanning_forest`.
     parent, order : ndarray, int32
         The forest (``order`` its first ``count`` entries).
@@ -615,14 +611,12 @@ def repair_cuts(points, est, graph, rev_ptr, rev_idx, valid, parent, order, rel)
     kids = _children(parent, order)
     flipped = 0
     for _ in range(REPAIR_ROUNDS):
-        agree, disagree, dfs, first, last = _cut_votes(points, est, graph, rev_ptr, rev_idx,
-                                                       valid, parent, order, *kids, rel)
+        agree, disagree = _cut_votes(points, est, graph, valid, parent, order, *kids, rel)
         wrong = suspect & (disagree >= REPAIR_MAJORITY * agree) & (disagree >= REPAIR_MIN)
         if not wrong.any():
             break
         at = np.flatnonzero(wrong)
-        i = at[np.argmax(disagree[at] - agree[at])]
-        rel[dfs[first[i]:last[i]]] *= -1
+        _flip_subtree(parent, order, rel, at[np.argmax(disagree[at] - agree[at])])
         flipped += 1
     return flipped
 

@@ -18,6 +18,7 @@ from curvature.orientation import (
     ORIENT_K,
     _children,
     _cut_votes,
+    _flip_subtree,
     _sign_agreement,
     forest_signs,
     relative_signs,
@@ -217,23 +218,24 @@ def test_a_thin_wall_does_not_flip_one_side(shape, seed):
 
 def test_cut_votes_are_the_weights_across_each_subtrees_cut():
     """The weights across each tree edge's cut (lowest common ancestors, subtree sums) equal
-    a brute-force count over the graph's edges with one end in the subtree."""
+    a brute-force count over the graph's edges with one end in the subtree (a graph of
+    mutual edges: each is read once, at its later end)."""
     cloud = synthetic.make("thin_plate", seed=3, noise=0.25)
     rng = np.random.default_rng(0)
     pick = rng.choice(len(cloud.points), 1500, replace=False)
     points = cloud.points[pick]
     normals = cloud.normals[pick] + rng.normal(0.0, 0.3, (1500, 3))
     normals /= np.linalg.norm(normals, axis=1)[:, None]
-    graph = knn_graph(points)
+    near = knn_graph(points)
+    mutual = (near[near] == np.arange(1500)[:, None, None]).any(axis=2)
+    graph = np.where(mutual, near, -1).astype(np.int32)
     parent, order, valid = forest(points, normals, graph)
-    rev = reverse_edges(graph, valid)
     rel = relative_signs(points, normals, parent, order)
     rel[rng.choice(1500, 300, replace=False)] *= -1  # some disagreement
-    agree, disagree, dfs, first, last = _cut_votes(points, normals, graph, *rev, valid,
-                                                   parent, order, *_children(parent, order),
-                                                   rel)
-    edges = {(min(i, j), max(i, j)) for i in range(1500) for j in graph[i]}
-    i, j = np.array(sorted(edges)).T
+    agree, disagree = _cut_votes(points, normals, graph, valid, parent, order,
+                                 *_children(parent, order), rel)
+    i, j = np.array(sorted({(min(a, b), max(a, b)) for a in range(1500) for b in graph[a]
+                            if b >= 0})).T
     chord = points[j] - points[i]
     val = np.array([_sign_agreement(*normals[a], *normals[b], *d)
                     for a, b, d in zip(i, j, chord, strict=True)])
@@ -241,11 +243,10 @@ def test_cut_votes_are_the_weights_across_each_subtrees_cut():
     along = np.abs(np.einsum("ij,ij->i", u, normals[i]) * np.einsum("ij,ij->i", u, normals[j]))
     weight = np.minimum(np.abs(val), 1.0) * (1.0 - np.minimum(along, 1.0))
     consistent = (val >= 0) == (rel[i] == rel[j])
-    assert sorted(dfs) == sorted(order)
     for c in rng.choice(order[parent[order] >= 0], 40, replace=False):
-        inside = np.zeros(1500, bool)
-        inside[dfs[first[c]:last[c]]] = True
-        cross = inside[i] != inside[j]
+        inside = np.ones(1500, np.int8)
+        _flip_subtree(parent, order, inside, c)
+        cross = (inside[i] < 0) != (inside[j] < 0)
         assert agree[c] == pytest.approx(weight[cross & consistent].sum(), abs=1e-9)
         assert disagree[c] == pytest.approx(weight[cross & ~consistent].sum(), abs=1e-9)
 
