@@ -162,13 +162,17 @@ def test_a_wall_open_border_reads_no_end(noise_share):
     assert not np.isfinite(out[:, 0]).any()
 
 
-@pytest.mark.parametrize("noise, model, rims_before, rims_below", [
-    (0.0, "axis", 4.54, 2.0), (0.1, "view", 3.21, 2.2), (0.5, "view", 23.4, 9.0)])
+@pytest.mark.parametrize("noise, model, rims_before, rims_below, faces_below", [
+    (0.0, "axis", 4.54, 2.0, 1e-9), (0.1, "view", 3.21, 2.2, 1.1), (0.5, "view", 23.4, 3.0, 1.1),
+    (0.1, "axis", 2.35, 2.2, 1.1), (0.25, "axis", 12.9, 4.5, 1.5)])
 def test_the_default_reads_the_thin_plate_rims_from_the_wall(noise, model, rims_before,
-                                                             rims_below):
+                                                             rims_below, faces_below):
     # the plate's rims (k = 33.3, 1.5 spacings) read about 10 at 0.5 % view noise, so the
     # orientation found no path round them and turned half the plate inward (4,522 of
-    # about 9,000 points, seed 1); now 1.41 / 1.67 / 5.9 off, oriented but for a handful
+    # about 9,000 points, seed 1); now 1.40 / 2.06 / 2.38 off, oriented but for a handful.
+    # At 0.25 % per axis the rims read 12.9 and half the plate turned until the noise was
+    # measured without the wall's other face (3.75 now); at 0.1 % per axis 2.35 until arc
+    # reads replaced estimates with larger standard errors (2.06).
     plate = synthetic.make("thin_plate", seed=1, noise=noise, noise_model=model)
     res = curvature.estimate(plate.points)
     ok = (res.status == 0) & plate.interior
@@ -178,7 +182,7 @@ def test_the_default_reads_the_thin_plate_rims_from_the_wall(noise, model, rims_
     rims = ok & (plate.k1 > 10.0)
     assert worst[rims].mean() < rims_below < rims_before
     faces = ok & plate.region_mask("face")
-    assert worst[faces].mean() < (1e-9 if noise == 0.0 else 1.1)
+    assert worst[faces].mean() < faces_below
 
 
 def _bench_blade(noise, seed=1):
