@@ -219,11 +219,16 @@ def _edge_weight(a0, a1, a2, b0, b1, b2, d0, d1, d2):
     by the first term alone: one such edge flipped a whole side of a thin plate or blade.
     """
     w = max(1.0 - abs(a0 * b0 + a1 * b1 + a2 * b2), 0.0)
+    return w + min(CHORD_WEIGHT * _chord_along(a0, a1, a2, b0, b1, b2, d0, d1, d2), CHORD_CAP)
+
+
+@njit(cache=True, inline="always")
+def _chord_along(a0, a1, a2, b0, b1, b2, d0, d1, d2):
+    """``|u . a| |u . b|`` of the unit chord u = d / |d| (0 where d is 0)."""
     dd = d0 * d0 + d1 * d1 + d2 * d2
-    if dd > 0.0:
-        along = abs(d0 * a0 + d1 * a1 + d2 * a2) * abs(d0 * b0 + d1 * b1 + d2 * b2) / dd
-        w += min(CHORD_WEIGHT * along, CHORD_CAP)
-    return w
+    if not dd > 0.0:
+        return 0.0
+    return abs(d0 * a0 + d1 * a1 + d2 * a2) * abs(d0 * b0 + d1 * b1 + d2 * b2) / dd
 
 
 @njit(cache=True, inline="always")
@@ -541,13 +546,9 @@ def _cut_votes(points, est, graph, valid, parent, order, kid_ptr, kids, rel):
                 d2 = points[v, 2] - points[u, 2]
                 val = _sign_agreement(est[u, 0], est[u, 1], est[u, 2], est[v, 0], est[v, 1],
                                       est[v, 2], d0, d1, d2)
-                dd = d0 * d0 + d1 * d1 + d2 * d2
-                along = 0.0
-                if dd > 0.0:
-                    along = min(abs(d0 * est[u, 0] + d1 * est[u, 1] + d2 * est[u, 2])
-                                * abs(d0 * est[v, 0] + d1 * est[v, 1] + d2 * est[v, 2]) / dd,
-                                1.0)
-                w = min(abs(val), 1.0) * (1.0 - along)
+                along = _chord_along(est[u, 0], est[u, 1], est[u, 2], est[v, 0], est[v, 1],
+                                     est[v, 2], d0, d1, d2)
+                w = min(abs(val), 1.0) * (1.0 - min(along, 1.0))
                 if (val >= 0.0) == (rel[u] == rel[v]):
                     agree[u] += w
                     agree[v] += w

@@ -415,9 +415,10 @@ def _fit_one(points, p, nbr, noise, out):
             count += 1
             d, on = _profile_distance(x[i], y[i], r, cx, half, sin_a, cos_a)
             arc += on
-            crown += x[i] < cx - CROWN_COS * r and abs(d) <= ON_ARC_NOISE * noise
-            open_ss += (abs(y[i]) - half) ** 2
-            if not wall:
+            if wall:
+                crown += x[i] < cx - CROWN_COS * r and abs(d) <= ON_ARC_NOISE * noise
+                open_ss += (abs(y[i]) - half) ** 2
+            else:
                 dp, _ = _profile_distance(x[i], y[i], r + step, (r + step) / sin_a, 0.0,
                                           sin_a, cos_a)
                 dm, _ = _profile_distance(x[i], y[i], r - step, (r - step) / sin_a, 0.0,
@@ -428,10 +429,9 @@ def _fit_one(points, p, nbr, noise, out):
                   / max(count - 1, 1))
     if count < MIN_SIDE or arc < MIN_ARC or rms > FIT_NOISE * noise:
         return False
-    if wall and (crown < MIN_ARC or open_ss - rms * rms * max(count - 1, 1)
-                 < WALL_GAIN * noise * noise):
-        return False  # a wall's open border: its faces stop, no arc joins them
     if wall:
+        if crown < MIN_ARC or open_ss - rms * rms * max(count - 1, 1) < WALL_GAIN * noise * noise:
+            return False  # a wall's open border: its faces stop, no arc joins them
         # the faces' distance at u = 0 (p's place along the wall, near its end)
         var_r = 0.25 * (va1 + va0)
     else:
