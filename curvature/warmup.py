@@ -120,6 +120,15 @@ def _anchor_fits_once(cloud) -> None:
                     np.empty(a, np.int8), np.empty(a), np.empty(a, np.int8))
 
 
+def _flip_once() -> None:
+    """``orientation._flip_subtree`` on a three-point forest: it runs only where the cut
+    repair flips a subtree, which no cloud of the warm-up is sure to need."""
+    from .orientation import _flip_subtree
+
+    parent = np.array([-1, 0, 1], np.int32)
+    _flip_subtree(parent, np.arange(3, dtype=np.int32), np.ones(3, np.int8), 1)
+
+
 def steps() -> Iterator[Step]:
     """Every run the warm-up makes, as ``(label, call)``."""
     clean = synthetic.torus(1500, seed=1)
@@ -163,6 +172,7 @@ def steps() -> Iterator[Step]:
     yield "read compressed pcd", lambda: read_bytes(_compressed_pcd(clean.points[:100]), "pcd")
     yield "lzf", lambda: lzf_decompress(_literal_lzf(b"warm-up"), 7)
     yield "anchored fits without scale selection", lambda: _anchor_fits_once(noisy)
+    yield "orientation, a subtree flipped", _flip_once
 
 
 def kernels() -> Iterator[tuple[str, object]]:

@@ -72,7 +72,15 @@ from ..fitting.normal_field import (
     pca_normals,
 )
 from ..fitting.normal_quadric import N_QUAD
-from ..fitting.outliers import ISOLATION_K, isolated, off_surface
+from ..fitting.outliers import (
+    ISOLATION_K,
+    OWN_SHEET_CANDIDATE,
+    OWN_SHEET_K,
+    isolated,
+    off_sheets,
+    off_surface,
+    sheet_limit,
+)
 from ..fitting.parallel_sheets import SHEET_K, parallel_sheets
 from ..fitting.rounded_edge import (
     EDGE_FAN_K,
@@ -965,6 +973,8 @@ class AutoRun:
                 r_fit[sl] = np.sqrt(d2[:, kp - 1])
             self._tick(2 * (sl.stop - sl.start) if self.plan.clean else sl.stop - sl.start)
         isolated(self.points, self.tree, r_isolation, self.outliers)
+        if not self.plan.clean:
+            self._off_sheets(field, flat, r_isolation)
         renormalled = self._normals_without_outliers(field, r_normal, normal_k)
         rows, shifts = np.concatenate(rows), np.concatenate(shifts)
         sided = (np.empty(0, np.int64) if self.plan.clean
@@ -980,6 +990,24 @@ class AutoRun:
         keep = ~self.outliers[rows] & ~np.isin(rows, renormalled) & ~np.isin(rows, sided)
         self.shift_rows, self.shifts = rows[keep], shifts[keep]
         return field, (r_normal, r_fit)
+
+    def _off_sheets(self, field, flat, reach) -> None:
+        """Flag as outliers, in ``self.outliers``, the points on no sheet of their nearest
+        neighbors (:func:`~curvature.fitting.outliers.off_sheets`: inside a thin wall, past a
+        wedge's tip), tested where the stage-1 neighborhood (flatness ``flat`` (n,), normals
+        ``field`` (n, 3)) is far from flat; ``reach`` (n,) is each point's distance to its
+        ISOLATION_K-th neighbor."""
+        limit = sheet_limit(self._noise(), self.plan.spacing)
+        rows = np.flatnonzero((flat > OWN_SHEET_CANDIDATE) & ~self.outliers).astype(np.int64)
+        k = min(OWN_SHEET_K, self.points.shape[0] - 1)
+        if not np.isfinite(limit) or rows.size == 0 or k < 1:
+            return
+        found = np.zeros(rows.size, bool)
+        for start in range(0, rows.size, self.chunk_size):
+            sl = slice(start, start + self.chunk_size)
+            nbr = knn_csr(self.points, self.tree, rows[sl], k)[1].reshape(-1, k)
+            off_sheets(self.points, rows[sl], nbr, field, reach, self.outliers, limit, found[sl])
+        self.outliers[rows[found]] = True
 
     def _normals_of_one_side(self, field, flat, r_normal, normal_k) -> np.ndarray:
         """Stage-1 normals on thin walls over one side (:mod:`.wall_sides`), in ``field``;

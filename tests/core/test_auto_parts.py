@@ -250,8 +250,8 @@ def test_outliers_leave_the_inliers_nearly_unchanged(noisy_box):
     cloud, res = noisy_box
     dirty = synthetic.filleted_box(noise=0.05, seed=1, outliers=0.01)
     res_dirty = curvature.estimate(dirty.points, normals=dirty.normals)
-    # measured: faces +16 % (k1) and +1 % (k2), fillets +8 % (k1), corners +8 % (k1) and +2 %
-    # (k2); issue 15 asks for at most 20 % (stop 34: faces +11 %; before the refits: faces
+    # measured (stop 58): faces +11 % (k1) and 0 % (k2), fillets +8 % / +13 %, corners -4 % /
+    # +7 %; issue 15 asks for at most 20 % (stop 34: faces +11 %; before the refits: faces
     # +12 %, fillets +35 %)
     assert region_mean(dirty, res_dirty, "face") <= 1.2 * region_mean(cloud, res, "face")
     assert region_mean(dirty, res_dirty, "face", "k2") <= 1.2 * region_mean(cloud, res, "face",
@@ -262,6 +262,19 @@ def test_outliers_leave_the_inliers_nearly_unchanged(noisy_box):
                     <= 1.2 * region_mean(cloud, res, region, field)), (region, field)
     inliers = ~dirty.region_mask("outlier")
     assert np.all(res_dirty.status[inliers] == 0)
+
+
+def test_outliers_past_a_wedge_tip_leave_its_edge_zone_unchanged():
+    # Uniform outliers in the blade's box fall inside its thin trailing end or just past its
+    # tip, where the offset test cannot see them (curvature.fitting.outliers.off_sheets).
+    # measured (seed 1): edge zone 2.03 -> 4.07 (+101 %) before that test, 2.03 -> 2.09 with
+    # it; leading edge +8 %, crest -4 %
+    clean, dirty = (synthetic.blade(noise=0.1, seed=1, outliers=share) for share in (0.0, 0.01))
+    res, res_dirty = (curvature.estimate(c.points, normals=c.normals) for c in (clean, dirty))
+    for region in ("edge_zone", "leading_edge", "crest"):
+        mean = np.nanmean(worst(clean, res)[clean.region_mask(region)])
+        mean_dirty = np.nanmean(worst(dirty, res_dirty)[dirty.region_mask(region)])
+        assert mean_dirty <= 1.2 * mean, (region, mean, mean_dirty)
 
 
 def test_thin_plate_faces_stay_flat():
