@@ -125,7 +125,8 @@ def off_sheets(points, query, nbr, normals, reach, excluded, limit, out):
     nbr : ndarray, shape (m, k)
         Nearest neighbors of each query point, nearest first (the point itself not listed).
     normals : ndarray, shape (n, 3)
-        Unit normal of every point (NaN: its plane does not count).
+        Unit normal of every point (NaN: its plane does not count; a point with fewer than
+        OWN_SHEET_RANK neighbors that have one is not flagged).
     reach : ndarray, shape (n,)
         Distance of every point to its ISOLATION_K-th nearest neighbor: a neighbor farther
         from p than OWN_SHEET_REACH times its own does not count.
@@ -140,19 +141,22 @@ def off_sheets(points, query, nbr, normals, reach, excluded, limit, out):
     for j in prange(query.shape[0]):
         p = query[j]
         near = 0
+        planes = 0  # neighbors with a plane to judge by
         for i in range(k):
             q = nbr[j, i]
-            if excluded[q]:
+            if excluded[q] or not np.isfinite(normals[q, 0]):
                 continue
+            planes += 1
             h = 0.0
             r2 = 0.0
             for d in range(3):
                 u = points[p, d] - points[q, d]
                 h += u * normals[q, d]
                 r2 += u * u
-            if abs(h) <= limit and r2 <= (OWN_SHEET_REACH * reach[q]) ** 2:  # NaN compares False
+            if abs(h) <= limit and r2 <= (OWN_SHEET_REACH * reach[q]) ** 2:
                 near += 1
-        out[j] = near < OWN_SHEET_RANK
+        # Too few planes (degenerate neighborhoods around) say nothing: not flagged.
+        out[j] = planes >= OWN_SHEET_RANK and near < OWN_SHEET_RANK
 
 
 def isolated(points: np.ndarray, tree: tuple, reach: np.ndarray, out: np.ndarray,

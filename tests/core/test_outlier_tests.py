@@ -69,5 +69,10 @@ def test_points_inside_a_thin_wall_or_past_a_wedge_tip_lie_on_no_sheet():
     limit = sheet_limit(noise, 0.3)  # the plan's spacing: about its 24th neighbor's distance
     off_sheets(pts, every, nbr, normals, reach, np.zeros(len(pts), bool), limit, flags)
     np.testing.assert_array_equal(np.flatnonzero(flags), len(pts) - 5 + np.arange(5))
+    # a point whose neighbors have no plane (degenerate PCA) is not judged
+    lone = normals.copy()
+    lone[nbr[1000]] = np.nan
+    off_sheets(pts, every, nbr, lone, reach, np.zeros(len(pts), bool), limit, flags)
+    assert not flags[1000] and flags[-5:].all()
     # without the cloud's noise there is no test
     assert sheet_limit(0.0, 0.3) == np.inf and sheet_limit(np.nan, 0.3) == np.inf
