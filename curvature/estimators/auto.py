@@ -942,6 +942,8 @@ class AutoRun:
         r_isolation = np.empty(n)
         flat = np.empty(n)
         rows, shifts = [np.empty(0, np.int64)], [np.empty((0, 3))]
+        # the sheet test's candidates and their nearest neighbors (_off_sheets)
+        walls, wall_nbr = [np.empty(0, np.int64)], [np.empty((0, min(OWN_SHEET_K, k)), np.int32)]
         for sl in self._chunks(n):
             query = np.arange(sl.start, sl.stop, dtype=np.int64)
             indptr, indices, d2 = knn_csr(self.points, self.tree, query, k)
@@ -953,6 +955,9 @@ class AutoRun:
             off_surface(self.points, query, np.ascontiguousarray(nbr[:, :normal_k]), field[sl],
                         self.plan.spacing, self.outliers[sl])
             if not self.plan.clean:
+                thick = np.flatnonzero(flat[sl] > OWN_SHEET_CANDIDATE)
+                walls.append(query[thick])
+                wall_nbr.append(nbr[thick, :OWN_SHEET_K])
                 offsets = np.empty((query.shape[0], 3))
                 border_offsets(self.points, query, nbr[:, :normal_k], field[sl], r_normal[sl],
                                offsets)
@@ -974,7 +979,8 @@ class AutoRun:
             self._tick(2 * (sl.stop - sl.start) if self.plan.clean else sl.stop - sl.start)
         isolated(self.points, self.tree, r_isolation, self.outliers)
         if not self.plan.clean:
-            self._off_sheets(field, flat, r_isolation)
+            self._off_sheets(field, np.concatenate(walls), np.concatenate(wall_nbr), r_isolation)
+        del walls, wall_nbr
         renormalled = self._normals_without_outliers(field, r_normal, normal_k)
         rows, shifts = np.concatenate(rows), np.concatenate(shifts)
         sided = (np.empty(0, np.int64) if self.plan.clean
@@ -991,22 +997,20 @@ class AutoRun:
         self.shift_rows, self.shifts = rows[keep], shifts[keep]
         return field, (r_normal, r_fit)
 
-    def _off_sheets(self, field, flat, reach) -> None:
+    def _off_sheets(self, field, rows, nbr, reach) -> None:
         """Flag as outliers, in ``self.outliers``, the points on no sheet of their nearest
         neighbors (:func:`~curvature.fitting.outliers.off_sheets`: inside a thin wall, past a
-        wedge's tip), tested where the stage-1 neighborhood (flatness ``flat`` (n,), normals
-        ``field`` (n, 3)) is far from flat; ``reach`` (n,) is each point's distance to its
+        wedge's tip) among ``rows`` (r,), the points whose stage-1 neighborhood is far from
+        flat, with their nearest neighbors ``nbr`` (r, OWN_SHEET_K) from the stage-1 query;
+        ``field`` (n, 3) the stage-1 normals, ``reach`` (n,) each point's distance to its
         ISOLATION_K-th neighbor."""
         limit = sheet_limit(self._noise(), self.plan.spacing)
-        rows = np.flatnonzero((flat > OWN_SHEET_CANDIDATE) & ~self.outliers).astype(np.int64)
-        k = min(OWN_SHEET_K, self.points.shape[0] - 1)
-        if not np.isfinite(limit) or rows.size == 0 or k < 1:
+        test = ~self.outliers[rows]
+        rows, nbr = rows[test], np.ascontiguousarray(nbr[test])
+        if not np.isfinite(limit) or rows.size == 0 or nbr.shape[1] < 1:
             return
         found = np.zeros(rows.size, bool)
-        for start in range(0, rows.size, self.chunk_size):
-            sl = slice(start, start + self.chunk_size)
-            nbr = knn_csr(self.points, self.tree, rows[sl], k)[1].reshape(-1, k)
-            off_sheets(self.points, rows[sl], nbr, field, reach, self.outliers, limit, found[sl])
+        off_sheets(self.points, rows, nbr, field, reach, self.outliers, limit, found)
         self.outliers[rows[found]] = True
 
     def _normals_of_one_side(self, field, flat, r_normal, normal_k) -> np.ndarray:

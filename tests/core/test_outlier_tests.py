@@ -61,9 +61,8 @@ def test_points_inside_a_thin_wall_or_past_a_wedge_tip_lie_on_no_sheet():
                     np.tile(tilt * [1, 1, -1], (len(uv), 1)), np.full((5, 3), np.nan)]
     tree = build_tree(pts)
     every = np.arange(len(pts), dtype=np.int64)
-    nbr, d2 = np.empty((len(pts), 9), np.int64), np.empty((len(pts), 9))
-    knn_parallel(pts, tree, every, 9, nbr, d2)
-    nbr = np.ascontiguousarray(nbr[:, 1:])  # the point itself first
+    nbr = np.empty((len(pts), 8), np.int64)  # the point itself not listed
+    knn_parallel(pts, tree, every, 8, nbr, np.empty((len(pts), 8)))
     reach = _isolation_reach(pts, tree, every)
     flags = np.zeros(len(pts), bool)
     limit = sheet_limit(noise, 0.3)  # the plan's spacing: about its 24th neighbor's distance
