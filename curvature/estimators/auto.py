@@ -73,15 +73,17 @@ from ..fitting.normal_field import (
 )
 from ..fitting.normal_quadric import N_QUAD
 from ..fitting.outliers import (
+    FACE_K,
     ISOLATION_K,
     OWN_SHEET_CANDIDATE,
     OWN_SHEET_K,
+    between_faces,
     isolated,
     off_sheets,
     off_surface,
     sheet_limit,
 )
-from ..fitting.parallel_sheets import SHEET_K, parallel_sheets
+from ..fitting.parallel_sheets import SHEET_K, own_sheet_lists, parallel_sheets
 from ..fitting.rounded_edge import (
     EDGE_FAN_K,
     EDGE_KEEP,
@@ -114,6 +116,7 @@ from .beside_edges import (
     normals_near,
     one_sided_normals,
     reached,
+    select_entries,
     widening,
     without,
 )
@@ -806,6 +809,9 @@ class AutoRun:
         self.track_reach = track_reach
         self.reach: np.ndarray | None = None
         self.outliers = np.zeros(points.shape[0], bool)
+        # Points whose stage-1 normal was read over one side of a thin wall (_stage1): their
+        # fits keep to that side where their lists hold both (_fit_lists)
+        self.sided = np.zeros(points.shape[0], bool)
         # Points whose stage-1 normal belongs elsewhere (the cloud's border) and the offsets
         # the first pass reads them at (curvature.fitting.border_shift); none on a dense
         # cloud's thinned share, whose normals come from the whole cloud.
@@ -978,13 +984,19 @@ class AutoRun:
                 r_fit[sl] = np.sqrt(d2[:, kp - 1])
             self._tick(2 * (sl.stop - sl.start) if self.plan.clean else sl.stop - sl.start)
         isolated(self.points, self.tree, r_isolation, self.outliers)
+        walls = np.concatenate(walls)
         if not self.plan.clean:
-            self._off_sheets(field, np.concatenate(walls), np.concatenate(wall_nbr), r_isolation)
-        del walls, wall_nbr
+            self._off_sheets(field, walls, np.concatenate(wall_nbr), r_isolation)
+        del wall_nbr
         renormalled = self._normals_without_outliers(field, r_normal, normal_k)
         rows, shifts = np.concatenate(rows), np.concatenate(shifts)
         sided = (np.empty(0, np.int64) if self.plan.clean
                  else self._normals_of_one_side(field, flat, r_normal, normal_k))
+        if not self.plan.clean:
+            renormalled, sided = self._between_faces(field, flat, r_normal, normal_k, walls,
+                                                     renormalled, sided)
+        del walls
+        self.sided[sided] = True
         # Neighborhoods far from flat, beyond what noise makes of a flat one: where a rounded
         # edge may be (_rounded_edges).
         self.edge_candidates = np.flatnonzero(worth_trying(flat, r_normal, self._noise())
@@ -1013,6 +1025,36 @@ class AutoRun:
         off_sheets(self.points, rows, nbr, field, reach, self.outliers, limit, found)
         self.outliers[rows[found]] = True
 
+    def _between_faces(self, field, flat, r_normal, normal_k, walls, renormalled, sided):
+        """Flag as outliers, in ``self.outliers``, the candidates ``walls`` whose neighbors
+        lie on two parallel faces of a thin wall and that lie on neither
+        (:func:`~curvature.fitting.outliers.between_faces`), judged by the wall's one-sided
+        normals (``sided``); then refit the normals they tilted, one-sided again on the
+        wall. Returns the rows refitted without outliers and those read over one side, as
+        updated.
+        """
+        test = walls[~self.outliers[walls]]
+        k = min(FACE_K, self.points.shape[0] - 1)
+        fresh = [np.empty(0, np.int64)]
+        noise = self._noise()
+        for start in range(0, test.size, self.chunk_size):
+            query = test[start:start + self.chunk_size]
+            found = np.empty(query.size, bool)
+            between_faces(self.points, query, np.ascontiguousarray(self._nearest(query, k)[0]),
+                          field, self.outliers, noise, found)
+            fresh.append(query[found])
+        fresh = np.concatenate(fresh)
+        if fresh.size == 0:
+            return renormalled, sided
+        # all flagged at once: a point's verdict does not depend on the chunk it was in
+        self.outliers[fresh] = True
+        again = self._normals_without_outliers(field, r_normal, normal_k, fresh)
+        only = np.zeros_like(flat)
+        only[again] = flat[again]
+        resided = self._normals_of_one_side(field, only, r_normal, normal_k)
+        sided = np.union1d(np.setdiff1d(sided, np.union1d(again, fresh)), resided)
+        return np.union1d(renormalled, again), sided
+
     def _normals_of_one_side(self, field, flat, r_normal, normal_k) -> np.ndarray:
         """Stage-1 normals on thin walls over one side (:mod:`.wall_sides`), in ``field``;
         returns the rows replaced."""
@@ -1029,14 +1071,16 @@ class AutoRun:
         plan's cubic-fit residual over :data:`NOISE_RESIDUAL_SHARE`."""
         return self.plan.cubic_noise * self.plan.spacing / NOISE_RESIDUAL_SHARE
 
-    def _normals_without_outliers(self, field, r_normal, normal_k) -> np.ndarray:
-        """Stage-1 normals again, without the outliers, where one was among the neighbors.
+    def _normals_without_outliers(self, field, r_normal, normal_k, out=None) -> np.ndarray:
+        """Stage-1 normals again, without the outliers, where one (of ``out``, int64, if
+        given; else any) was among the neighbors.
 
         One outlier a spacing off a face tilts the PCA normals of every point that has it among
         its ``normal_k`` neighbors, and the normal fits then read that tilt as curvature.
         Returns the rows whose normals were refitted (int64).
         """
-        out = np.flatnonzero(self.outliers)
+        if out is None:
+            out = np.flatnonzero(self.outliers)
         if out.size == 0:
             return np.empty(0, np.int64)
         d, _ = cKDTree(self.points[out]).query(self.points, k=1,
@@ -1969,14 +2013,14 @@ class AutoRun:
         outputs = (coef, scale, frame, quad, quad_scale, model, resid, status, chosen, sigma,
                    bias, longer)
         fit = (ladder, kinds, tops, strides, gamma, calib, w, positions, field)
-        self._fit_lists(anchors, None, listed, fit, outputs, reach, drop)
+        self._fit_lists(anchors, None, listed, fit, outputs, reach, drop, positional)
         # The anchors beside a tight ridge fit again from the long ridge rung's pool (bun000,
         # no normals given: 956 of 45,814 fits, 0.05 s of 1.4).
         again = np.flatnonzero(longer)
         if again.size:
             self._grow_total(again.size)
             listed = min(max(k, scale_selection.RIDGE_LONG_POOL), self.points.shape[0] - 1)
-            self._fit_lists(anchors, again, listed, fit, outputs, reach, drop)
+            self._fit_lists(anchors, again, listed, fit, outputs, reach, drop, positional)
         if sigma_share is not None:
             sigma = sigma * sigma_share
         # The kept fit's scale: the quadric's unit where it (or a rung) was kept.
@@ -2008,11 +2052,13 @@ class AutoRun:
             out[at] = found
         return out
 
-    def _fit_lists(self, anchors, rows, listed, fit, outputs, reach, drop=None) -> None:
+    def _fit_lists(self, anchors, rows, listed, fit, outputs, reach, drop=None,
+                   own_sheet=True) -> None:
         """:func:`~curvature.fitting.scale_selection.multiscale_anchor_fits` at
         ``anchors[rows]`` (every anchor where ``rows`` is None) from lists of ``listed``
-        neighbors (without the points ``drop`` marks, if given), into ``outputs[...][rows]``
-        (and ``reach[rows]``), in chunks of about as many neighbor entries as a chunk of
+        neighbors (without the points ``drop`` marks, if given; with ``own_sheet``, on a thin
+        wall's one face, :meth:`_own_sheet`), into ``outputs[...][rows]`` (and
+        ``reach[rows]``), in chunks of about as many neighbor entries as a chunk of
         24-neighbor queries."""
         ladder, kinds, tops, strides, gamma, calib, w, positions, field = fit
         step = max(64, self.chunk_size * 24 // max(listed, 24))
@@ -2028,6 +2074,8 @@ class AutoRun:
                 reach[at] = np.maximum((np.sqrt(d2) + w[nbr]).max(axis=1), w[query])
             if drop is not None:
                 indptr, indices = without(indptr, indices, drop)
+            if own_sheet:
+                indptr, indices = self._own_sheet(query, field, indptr, indices)
             parts = [out[at] for out in outputs]
             multiscale_anchor_fits(self.points if positions is None else positions, field,
                                    query, indptr, indices,
@@ -2038,6 +2086,27 @@ class AutoRun:
                 for out, part in zip(outputs, parts, strict=True):
                     out[at] = part
             self._tick(query.shape[0])
+
+    def _own_sheet(self, query, field, indptr, indices):
+        """The CSR lists of ``query`` with, at the points whose stage-1 normal was read over
+        one side of a thin wall, the wall's other face left out where the list holds two
+        parallel sheets (:func:`~curvature.fitting.parallel_sheets.own_sheet_lists`, split
+        by ``field``'s normal at the anchor).
+
+        Beside a thin wall's open border the two faces' points fill a list unevenly, and a
+        fit over both read the border as a rounded rim: on the thin plate's faces within a
+        spacing of the cut the mean error was 1.8 and depended on where the anchor grid
+        fell (docs/accuracy.md, section 9, step 41). Only the curvature fits (pass 2 and
+        the refits) keep to one face: the first pass's normal refinement over one face
+        refined the 10,000-point plate's normals worse (its faces then erred 0.39, 0.25
+        with both).
+        """
+        test = self.sided[query]
+        if not test.any():
+            return indptr, indices
+        keep = np.empty(indices.shape[0], bool)
+        own_sheet_lists(self.points, query, field, indptr, indices, test, self.outliers, keep)
+        return select_entries(indptr, indices, keep)
 
     def _refined_field(self, field, anchors, owner, fits, rows=None):
         """First-pass normals at every point (or at ``rows``, increasing int64), computed in

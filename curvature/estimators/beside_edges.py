@@ -34,7 +34,7 @@ from ..fitting.rounded_edge import NORMAL_TOLERANCE
 from .wall_sides import SIDE_FLAT
 
 __all__ = ["BESIDE_REACH", "DROP_GROW", "beside_rows", "edge_drop", "normals_near",
-           "one_sided_normals", "reached", "widening", "without"]
+           "one_sided_normals", "reached", "select_entries", "widening", "without"]
 
 #: The edge left out of the fits: the points that read a circle and every point within this
 #: many times the arc of the circle's end band (``NORMAL_TOLERANCE`` degrees times its
@@ -163,10 +163,26 @@ def without(indptr: np.ndarray, indices: np.ndarray, drop: np.ndarray):
     """
     keep = ~drop[indices]
     keep[indptr[:-1]] = True
-    counts = np.add.reduceat(keep.astype(np.int64), indptr[:-1])
-    out = np.zeros(indptr.shape[0], np.int64)
-    np.cumsum(counts, out=out[1:])
-    return out, indices[keep]
+    return select_entries(indptr, indices, keep)
+
+
+def select_entries(indptr: np.ndarray, indices: np.ndarray, keep: np.ndarray):
+    """CSR lists of the entries ``keep`` marks, in the same order.
+
+    Parameters
+    ----------
+    indptr : ndarray, shape (m + 1,), int64
+    indices : ndarray, shape (nnz,)
+    keep : ndarray, shape (nnz,), bool
+
+    Returns
+    -------
+    indptr, indices : ndarray
+        The shorter lists (a row may become empty).
+    """
+    kept = np.zeros(keep.shape[0] + 1, np.int64)
+    np.cumsum(keep, out=kept[1:])
+    return kept[indptr], indices[keep]
 
 
 def one_sided_normals(points: np.ndarray, query: np.ndarray, nbr: np.ndarray,

@@ -14,6 +14,11 @@ groups' means over their pooled standard deviation, each group at least
 the planes fitted to the two groups have slopes within :data:`SHEET_SLOPE` of each other. A
 wedge (a blade's sides near its trailing edge) is two sheets but not parallel: a fit across it
 tilts with the wedge, and its residual is that misfit.
+
+The same split keeps the curvature fits of a wall's points on their own face where their
+neighbor lists hold both (:func:`own_sheet_lists`; beside a wall's open border a fit over
+both faces read the border as a rounded rim), and finds the points between a wall's faces
+(:func:`~curvature.fitting.outliers.between_faces`).
 """
 
 from __future__ import annotations
@@ -23,7 +28,8 @@ from numba import njit, prange
 
 from .quadric import tangent_basis
 
-__all__ = ["SHEET_GAP", "SHEET_K", "SHEET_SHARE", "SHEET_SLOPE", "parallel_sheets"]
+__all__ = ["SHEET_GAP", "SHEET_K", "SHEET_SHARE", "SHEET_SLOPE", "own_sheet_lists",
+           "parallel_sheets", "sheet_gap", "sheet_heights", "sheet_split"]
 
 #: Neighbors of the test: on the thin plate of 10,000 points (faces 3 spacings apart) the 48
 #: nearest hold a fifth of the other face, the 96 nearest a third.
@@ -67,6 +73,83 @@ def _plane_slope(h, u, v, idx, out):
     return True
 
 
+@njit(cache=True)
+def sheet_heights(points, p, nrm, nbr, excluded):
+    """Heights ``h`` over the plane through ``points[p]`` with unit normal ``nrm`` and
+    tangent coordinates ``u, v`` of the points ``nbr`` not ``excluded``; returns (h, u, v,
+    where), ``where`` their positions in ``nbr``."""
+    e1, e2 = tangent_basis(nrm)
+    m = 0
+    for i in range(nbr.shape[0]):
+        if not excluded[nbr[i]]:
+            m += 1
+    h, u, v = np.empty(m), np.empty(m), np.empty(m)
+    where = np.empty(m, np.int64)
+    c = 0
+    for i in range(nbr.shape[0]):
+        if excluded[nbr[i]]:
+            continue
+        d = points[nbr[i]] - points[p]
+        h[c] = d[0] * nrm[0] + d[1] * nrm[1] + d[2] * nrm[2]
+        u[c] = d[0] * e1[0] + d[1] * e1[1] + d[2] * e1[2]
+        v[c] = d[0] * e2[0] + d[1] * e2[1] + d[2] * e2[2]
+        where[c] = i
+        c += 1
+    return h, u, v, where
+
+
+@njit(cache=True)
+def sheet_gap(h, least):
+    """The split of heights ``h`` into two sheets of at least ``least`` points each (module
+    docstring), slopes not compared: returns ``(order, split)``, the heights' ascending order
+    and the size of the lower group, or ``split = -1`` where no split reaches
+    :data:`SHEET_GAP`."""
+    m = h.shape[0]
+    order = np.argsort(h)
+    if m < 2 * least:
+        return order, -1
+    total = total2 = 0.0
+    for i in range(m):
+        total += h[i]
+        total2 += h[i] * h[i]
+    best, split = 0.0, -1
+    low = low2 = 0.0
+    for c in range(1, m):
+        x = h[order[c - 1]]
+        low += x
+        low2 += x * x
+        if c < least or m - c < least:
+            continue
+        lm = low / c
+        hm = (total - low) / (m - c)
+        within = (low2 - low * lm) + ((total2 - low2) - (total - low) * hm)
+        if not within > 0.0:
+            continue
+        gap = (hm - lm) / np.sqrt(within / (m - 2))
+        if gap > best:
+            best, split = gap, c
+    if best < SHEET_GAP:
+        return order, -1
+    return order, split
+
+
+@njit(cache=True)
+def sheet_split(h, u, v):
+    """The split of heights ``h`` (at tangent coordinates ``u, v``) into two parallel sheets
+    (module docstring): as :func:`sheet_gap`, with ``split = -1`` also where the planes
+    fitted to the two groups are not parallel."""
+    order, split = sheet_gap(h, max(int(SHEET_SHARE * h.shape[0]), 3))
+    if split < 0:
+        return order, -1
+    s_low, s_high = np.empty(2), np.empty(2)
+    if not (_plane_slope(h, u, v, order[:split], s_low)
+            and _plane_slope(h, u, v, order[split:], s_high)):
+        return order, -1
+    if np.hypot(s_low[0] - s_high[0], s_low[1] - s_high[1]) >= SHEET_SLOPE:
+        return order, -1
+    return order, split
+
+
 @njit(parallel=True, cache=True)
 def parallel_sheets(points, anchors, normals, indptr, indices, out):
     """Whether each anchor's neighbors lie on two parallel sheets (module docstring).
@@ -82,49 +165,53 @@ def parallel_sheets(points, anchors, normals, indptr, indices, out):
     out : ndarray, shape (a,), bool
         Output.
     """
+    none = np.zeros(points.shape[0], np.bool_)
     for j in prange(anchors.shape[0]):
         out[j] = False
         nrm = normals[j]
         if not (np.isfinite(nrm[0]) and np.isfinite(nrm[1]) and np.isfinite(nrm[2])):
             continue
-        nbr = indices[indptr[j]:indptr[j + 1]]
-        m = nbr.shape[0]
-        least = max(int(SHEET_SHARE * m), 3)
-        if m < 2 * least:
+        h, u, v, _ = sheet_heights(points, anchors[j], nrm, indices[indptr[j]:indptr[j + 1]], none)
+        out[j] = sheet_split(h, u, v)[1] >= 0
+
+
+@njit(parallel=True, cache=True)
+def own_sheet_lists(points, anchors, normals, indptr, indices, test, excluded, keep):
+    """Mark, in each tested anchor's neighbor list, the entries on the anchor's own sheet.
+
+    Where the list's points (those not ``excluded``) lie on two parallel sheets, the entries
+    of the sheet on the far side of the gap between them from the anchor (the wall's other
+    face) are marked False; every other entry stays True.
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+    anchors : ndarray, shape (a,), int64
+    normals : ndarray, shape (n, 3)
+        Unit normals of every point, arbitrary sign (NaN: the anchor's list is kept whole).
+    indptr, indices : ndarray
+        CSR neighbor lists of the anchors, nearest first.
+    test : ndarray, shape (a,), bool
+        Anchors whose lists are tested.
+    excluded : ndarray, shape (n,), bool
+        Points that take no part in the split (outliers); they stay in the lists.
+    keep : ndarray, shape (indices.shape[0],), bool
+        Output.
+    """
+    for j in prange(anchors.shape[0]):
+        lo, hi = indptr[j], indptr[j + 1]
+        keep[lo:hi] = True
+        p = anchors[j]
+        nrm = normals[p]
+        if not (test[j] and np.isfinite(nrm[0]) and np.isfinite(nrm[1])
+                and np.isfinite(nrm[2])):
             continue
-        e1, e2 = tangent_basis(nrm)
-        p = points[anchors[j]]
-        h, u, v = np.empty(m), np.empty(m), np.empty(m)
-        for i in range(m):
-            d = points[nbr[i]] - p
-            h[i] = d[0] * nrm[0] + d[1] * nrm[1] + d[2] * nrm[2]
-            u[i] = d[0] * e1[0] + d[1] * e1[1] + d[2] * e1[2]
-            v[i] = d[0] * e2[0] + d[1] * e2[1] + d[2] * e2[2]
-        order = np.argsort(h)
-        total = total2 = 0.0
-        for i in range(m):
-            total += h[i]
-            total2 += h[i] * h[i]
-        best, split = 0.0, -1
-        low = low2 = 0.0
-        for c in range(1, m):
-            x = h[order[c - 1]]
-            low += x
-            low2 += x * x
-            if c < least or m - c < least:
-                continue
-            lm = low / c
-            hm = (total - low) / (m - c)
-            within = (low2 - low * lm) + ((total2 - low2) - (total - low) * hm)
-            if not within > 0.0:
-                continue
-            gap = (hm - lm) / np.sqrt(within / (m - 2))
-            if gap > best:
-                best, split = gap, c
-        if best < SHEET_GAP:
+        h, u, v, where = sheet_heights(points, p, nrm, indices[lo:hi], excluded)
+        order, split = sheet_split(h, u, v)
+        if split < 0:
             continue
-        s_low, s_high = np.empty(2), np.empty(2)
-        if not (_plane_slope(h, u, v, order[:split], s_low)
-                and _plane_slope(h, u, v, order[split:], s_high)):
-            continue
-        out[j] = np.hypot(s_low[0] - s_high[0], s_low[1] - s_high[1]) < SHEET_SLOPE
+        # the anchor's height is 0: its sheet is the group on its side of the gap's middle
+        low_own = 0.0 < 0.5 * (h[order[split - 1]] + h[order[split]])
+        start, stop = (split, h.shape[0]) if low_own else (0, split)
+        for c in range(start, stop):
+            keep[lo + where[order[c]]] = False
