@@ -76,18 +76,19 @@ def _plane_slope(h, u, v, idx, out):
 @njit(cache=True)
 def sheet_heights(points, p, nrm, nbr, excluded):
     """Heights ``h`` over the plane through ``points[p]`` with unit normal ``nrm`` and
-    tangent coordinates ``u, v`` of the points ``nbr`` not ``excluded``; returns (h, u, v,
-    where), ``where`` their positions in ``nbr``."""
+    tangent coordinates ``u, v`` of the points ``nbr`` not ``excluded`` (n,) bool (empty:
+    none is); returns (h, u, v, where), ``where`` their positions in ``nbr``. Empty rather
+    than n zeros: ``parallel_sheets`` runs once per chunk of a large cloud's anchors."""
     e1, e2 = tangent_basis(nrm)
     m = 0
     for i in range(nbr.shape[0]):
-        if not excluded[nbr[i]]:
+        if not (excluded.shape[0] and excluded[nbr[i]]):
             m += 1
     h, u, v = np.empty(m), np.empty(m), np.empty(m)
     where = np.empty(m, np.int64)
     c = 0
     for i in range(nbr.shape[0]):
-        if excluded[nbr[i]]:
+        if excluded.shape[0] and excluded[nbr[i]]:
             continue
         d = points[nbr[i]] - points[p]
         h[c] = d[0] * nrm[0] + d[1] * nrm[1] + d[2] * nrm[2]
@@ -165,7 +166,7 @@ def parallel_sheets(points, anchors, normals, indptr, indices, out):
     out : ndarray, shape (a,), bool
         Output.
     """
-    none = np.zeros(points.shape[0], np.bool_)
+    none = np.zeros(0, np.bool_)  # nothing excluded (sheet_heights)
     for j in prange(anchors.shape[0]):
         out[j] = False
         nrm = normals[j]
