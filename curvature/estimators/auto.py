@@ -2090,16 +2090,18 @@ class AutoRun:
     def _own_sheet(self, query, field, indptr, indices):
         """The CSR lists of ``query`` with, at the points whose stage-1 normal was read over
         one side of a thin wall, the wall's other face left out where the list holds two
-        parallel sheets (:func:`~curvature.fitting.parallel_sheets.own_sheet_lists`, split
-        by ``field``'s normal at the anchor).
+        parallel sheets, or two sheets of any slope where it lies behind its point (by the
+        wall's open border; :func:`~curvature.fitting.parallel_sheets.own_sheet_lists`,
+        split by ``field``'s normal at the anchor).
 
         Beside a thin wall's open border the two faces' points fill a list unevenly, and a
         fit over both read the border as a rounded rim: on the thin plate's faces within a
         spacing of the cut the mean error was 1.8 and depended on where the anchor grid
-        fell (docs/accuracy.md, section 9, step 41). Only the curvature fits (pass 2 and
-        the refits) keep to one face: the first pass's normal refinement over one face
-        refined the 10,000-point plate's normals worse (its faces then erred 0.39, 0.25
-        with both).
+        fell (docs/accuracy.md, section 9, step 41); the blade's sides by its open ends
+        read k2 of -20 to -40 where its wedge's faces were kept (step 42). Only the
+        curvature fits (pass 2 and the refits) keep to one face: the first pass's normal
+        refinement over one face refined the 10,000-point plate's normals worse (its faces
+        then erred 0.39, 0.25 with both).
         """
         test = self.sided[query]
         if not test.any():

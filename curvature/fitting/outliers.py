@@ -44,7 +44,7 @@ import numpy as np
 from numba import njit, prange
 
 from .linalg import jacobi3
-from .parallel_sheets import sheet_gap, sheet_heights
+from .parallel_sheets import at_an_end, sheet_gap, sheet_heights
 
 __all__ = ["FACE_K", "FACE_SIGMAS", "ISOLATION", "ISOLATION_K", "OUTLIER_FLOOR", "OUTLIER_SIGMAS",
            "OWN_SHEET_CANDIDATE", "OWN_SHEET_FLOOR", "OWN_SHEET_K", "OWN_SHEET_NOISE",
@@ -78,9 +78,6 @@ FACE_K = 48
 FACE_SIGMAS = 4.5
 #: Fewest points of a face (the farther face may show only a few at the list's edge).
 FACE_LEAST = 3
-#: A point whose neighbors' centroid lies farther from it than this share of their RMS
-#: distance is at an end of the wall, not inside it (:func:`_at_an_end`).
-FACE_SIDE = 0.45
 #: Normals within 10 degrees of each other agree (:func:`_consensus_normal`); at an end a
 #: point is judged only where at least FACE_END_AGREE of its neighbors' normals agree.
 FACE_END_AGREE = 0.75
@@ -270,20 +267,6 @@ def _parallel_offsets(h, u, v, order, split):
 
 
 @njit(cache=True)
-def _at_an_end(u, v):
-    """Whether the neighbors at tangent coordinates ``u, v`` (the point at the origin) lie
-    to one side of it: their centroid farther from it than FACE_SIDE times their RMS
-    distance (a half disc reads 0.6, a full one 0; the blade's trailing tip 0.63)."""
-    m = u.shape[0]
-    cu = cv = r2 = 0.0
-    for i in range(m):
-        cu += u[i]
-        cv += v[i]
-        r2 += u[i] * u[i] + v[i] * v[i]
-    return (cu * cu + cv * cv) / (m * m) > FACE_SIDE * FACE_SIDE * (r2 / m)
-
-
-@njit(cache=True)
 def _faces_normal(points, nbr, where, order, split, out):
     """Unit normal, into ``out``, of two faces: the eigenvector of the least eigenvalue of
     the covariance of the points ``nbr[where[order[:split]]]`` and ``nbr[where[order[split:]]]``
@@ -401,7 +384,7 @@ def between_faces(points, query, nbr, normals, excluded, noise, out):
         # normals nearly all agree, have a gap with nothing in it: a wedge's rounded tip
         # lies between its faces' planes too, and there half the normals are the other
         # face's.
-        if split < 0 or (_at_an_end(u, v) and agree < FACE_END_AGREE):
+        if split < 0 or (at_an_end(u, v) and agree < FACE_END_AGREE):
             continue
         # One slope for both faces: the farther face often holds only a few points at the
         # list's edge, whose own plane would tilt with their noise.
