@@ -60,12 +60,12 @@ from .kernels import MAX_FOOT_DIST, fit_monge, gather_local, principal_axes, spa
 from .linalg import cholesky, solve_lower
 from .normal_field import MODEL_FIELD, nfr_anchor_fits_one, supported
 from .normal_quadric import N_QUAD, curvature_from_quadric, regress_normal_quadric
-from .quadric import OK, foot_point, gradient_at, sampson_rms, shape_operator
+from .quadric import DEGENERATE, OK, foot_point, gradient_at, sampson_rms, shape_operator
 
 __all__ = ["BORDER_SIDE", "DEFAULT_GAMMA", "DESIGN_ISOTROPIC", "KIND_MONGE", "KIND_MONGE_RIDGE",
-           "KIND_NORMAL_QUADRIC", "RUNGS", "RUNG_GROWTH", "SIGMA_FLOOR", "TOPS", "design_spread",
-           "ladder_estimates", "multiscale_anchor_fits", "one_sided", "pass_rungs",
-           "scale_sigma"]
+           "KIND_NORMAL_QUADRIC", "RUNGS", "RUNG_GROWTH", "SIGMA_FLOOR", "TOPS", "TURN_GUARD",
+           "TURN_SLACK", "design_spread", "ladder_estimates", "multiscale_anchor_fits",
+           "one_sided", "pass_rungs", "scale_sigma", "turn_supports"]
 
 #: Rung models: a positional Monge quadric, the normal-constrained quadric, or a Monge
 #: quadric with CIRCULAR_ROUNDS of the circular correction (kernels.fit_monge). On a filleted
@@ -259,6 +259,15 @@ SWITCH_SLACK = 3.0 / 3.5
 BIAS_SHARE_MIN = 0.25
 # A foot point farther than this many fit units from the anchor means the fit missed it.
 FOOT_LIMIT = 2.0
+#: A normal-quadric rung's curvature k over its points' RMS distance h turns the normals by
+#: about k h across its patch; the rung is not used where k h exceeds TURN_GUARD times the
+#: 90th percentile of its points' normals' angles to the anchor's, plus TURN_SLACK (radians;
+#: the noise's own turning on small patches). Over both faces of the blade's wedge (2.6
+#: spacings thick, normals 12 degrees apart) 96-point quadrics read k of 26 to 43 on a flat
+#: side, k h about 1.4 where the normals turned 0.6 at most (docs/accuracy.md, section 9,
+#: step 43); no smooth shape's figure moved.
+TURN_GUARD = 2.0
+TURN_SLACK = 0.1
 #: The calibrated sigma of a Monge rung assumes its points spread around the anchor as in
 #: the cloud's interior. A patch cut by the cloud's border (a half-disk) determines the
 #: quadratic terms about 3.4 times worse: :func:`design_spread` is sqrt(s) times the largest
@@ -609,6 +618,44 @@ def _ridge_rung(points, field, p, nbr, s, kind, frame, quad, row):
 
 
 @njit(cache=True)
+def turn_supports(field, p, nbr, k, h):
+    """Whether the normals of ``nbr`` turn from p's enough for a curvature ``k`` over RMS
+    radius ``h`` (:data:`TURN_GUARD`).
+
+    Parameters
+    ----------
+    field : ndarray, shape (n, 3)
+        Unit normals, sign arbitrary (NaN: left out).
+    p : int
+    nbr : ndarray, shape (m,)
+    k, h : float
+        The largest principal curvature's size, and the points' RMS distance from p.
+
+    Returns
+    -------
+    bool
+        True also where fewer than 8 normals are known.
+    """
+    if k * h <= TURN_SLACK:  # (most rungs: no angle needed)
+        return True
+    m = nbr.shape[0]
+    dots = np.empty(m)
+    c = 0
+    for i in range(m):
+        q = nbr[i]
+        dot = abs(field[p, 0] * field[q, 0] + field[p, 1] * field[q, 1]
+                  + field[p, 2] * field[q, 2])
+        if np.isfinite(dot):
+            dots[c] = min(dot, 1.0)
+            c += 1
+    if c < 8:
+        return True
+    # the 90th percentile of the angles is the arccosine of the 10th of the cosines
+    turned = np.arccos(np.sort(dots[:c])[c - 1 - int(0.9 * (c - 1))])
+    return k * h <= TURN_GUARD * turned + TURN_SLACK
+
+
+@njit(cache=True)
 def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out, fit_long=True):
     """Every rung's fit at one anchor (rungs not smaller than the full list are skipped; the
     long ridge rung only with ``fit_long``).
@@ -683,6 +730,9 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out, fit_long=
                                                       quads[li])
             if st == OK:
                 st, c1, c2, _, _, _ = curvature_from_quadric(quads[li], h, origin, FOOT_LIMIT)
+                if st == OK and not turn_supports(field, p, nbr[:s], max(abs(c1), abs(c2)),
+                                                  h):
+                    st = DEGENERATE
         _store_rung(out[li], st, c1, c2, d, h, spread, inflate, misfit,
                     kinds[li] != KIND_NORMAL_QUADRIC)
     return ridge_frame
