@@ -33,10 +33,12 @@ def test_a_sphere_caps_normals_support_its_curvature_and_a_planes_do_not():
     flat = np.c_[tilt, np.ones(len(field))]
     flat /= np.linalg.norm(flat, axis=1)[:, None]
     assert not turn_supports(flat, 0, nbr, 1.0 / h, h)
-    # ... but do for the slack's worth, whatever their sign
+    # ... nor with half of them the other way round (a sign is no turn) ...
     flat[::2] *= -1.0
-    assert turn_supports(flat, 0, nbr, 0.9 * TURN_SLACK / h, h)
-    assert TURN_GUARD * np.radians(3.0) + TURN_SLACK < 1.0
+    assert not turn_supports(flat, 0, nbr, 1.0 / h, h)
+    # ... but do for the slack's worth and a little more
+    assert turn_supports(flat, 0, nbr, TURN_SLACK / h, h)
+    assert turn_supports(flat, 0, nbr, (TURN_SLACK + TURN_GUARD * np.radians(0.5)) / h, h)
 
 
 def test_unknown_normals_leave_the_rung_alone():
