@@ -40,7 +40,8 @@ On noisy scans the neighborhood size decides the error far more than the fit mod
    :mod:`curvature.fitting.outliers`) are left out of every fit and never anchor a cell. On
    clean clouds the implicit quadric over 24 neighbors is replaced by one over 16 or 12 where it
    straddles a curvature jump (its residual far above the smaller fits'), and a fit with
-   ``|k| h > 1`` goes to the anchored fits.
+   ``|k| h > 1``, or one the height quadric over its points does not confirm
+   (:mod:`curvature.fitting.height_check`), goes to the anchored fits.
 6. **Features the fits cannot resolve**, both branches at the end: sphere and cylinder fits
    where the points prefer them (noisy clouds, :mod:`.umbilic_pass`), and the tips of thin
    wedges and the rounded ends of walls, whose radius the faces fix, and the faces beside
@@ -63,6 +64,7 @@ from scipy.spatial import cKDTree
 from ..bounds import bounding_box, diagonal
 from ..fitting import scale_selection
 from ..fitting.border_shift import border_offsets, centroid_normals
+from ..fitting.height_check import unconfirmed
 from ..fitting.kernels import FIT_IMPLICIT, FIT_MONGE, SOLVER_TAUBIN, fit_batch
 from ..fitting.normal_field import (
     MODEL_QUADRIC,
@@ -1111,8 +1113,10 @@ class AutoRun:
         the smallest: a fit that straddles a curvature jump (a face beside a fillet) has a far
         larger residual than one on a single piece, while on smooth non-quadric surfaces the
         residuals grow slowly with size and 24 stays. A kept fit whose curvature the points
-        do not support (``|k| h`` above :data:`CLEAN_SUPPORT`) is marked
-        degenerate; :meth:`run` gives such points the anchored fits.
+        do not support (``|k| h`` above :data:`CLEAN_SUPPORT`), or an inexact one the height
+        quadric over its points does not confirm (:mod:`~curvature.fitting.height_check`), is
+        marked degenerate; :meth:`run` gives such points an exact neighbor's fit or the
+        anchored fits.
         """
         fit_batch(self.points, query, *_prefix_csr(nbr, kp), FIT_IMPLICIT, SOLVER_TAUBIN, True,
                   0.0, *_outputs(res, sl))
@@ -1140,14 +1144,30 @@ class AutoRun:
                                        axis=1)[:, 0] / count)
         self.clean_h[sl] = h
         curv = np.maximum(np.abs(res.k1[sl]), np.abs(res.k2[sl]))
-        loose = np.flatnonzero(curv * h > CLEAN_SUPPORT)
-        if loose.size:
-            rows = sl.start + loose
-            for arr in (res.k1, res.k2, res.residual):
-                arr[rows] = np.nan
-            for arr in (res.normals, res.dir1, res.dir2):
-                arr[rows] = np.nan
-            res.status[rows] = Status.DEGENERATE_FIT
+        loose = curv * h > CLEAN_SUPPORT
+        inexact = np.flatnonzero((res.residual[sl] > floor) & (res.status[sl] == Status.OK))
+        loose[inexact] |= self._unconfirmed(res, sl, query, nbr, h, inexact)
+        rows = sl.start + np.flatnonzero(loose)
+        for arr in (res.k1, res.k2, res.residual):
+            arr[rows] = np.nan
+        for arr in (res.normals, res.dir1, res.dir2):
+            arr[rows] = np.nan
+        res.status[rows] = Status.DEGENERATE_FIT
+
+    def _unconfirmed(self, res, sl, query, nbr, h, rows) -> np.ndarray:
+        """Which of the inexact implicit fits ``rows`` (indices into chunk ``sl``) the height
+        quadric over the same neighbors does not confirm (:mod:`.height_check`); ``h`` (chunk,)
+        is their RMS neighbor distance."""
+        off = np.zeros(rows.shape[0], bool)
+        count = res.neighbor_count[sl][rows]
+        for size in np.unique(count):
+            grp = np.flatnonzero(count == size)
+            out = _OutputView(res, sl.start + rows[grp])
+            fit_batch(self.points, query[rows[grp]], *_prefix_csr(nbr[rows[grp]], int(size)),
+                      FIT_MONGE, SOLVER_TAUBIN, True, 0.0, *out.arrays)
+            off[grp] = unconfirmed(res.k1[sl][rows[grp]], res.k2[sl][rows[grp]],
+                                   out.arrays[0], out.arrays[1], h[rows[grp]])
+        return off
 
     def _clean_std(self, res) -> None:
         """Standard errors of the clean fits: the model error their residual implies."""

@@ -40,8 +40,11 @@ def test_noise_free_shapes_within_issue_limits(shape, kwargs, limit):
     assert res.info["plan"]["clean"] and res.info["plan"]["noise"] < 0.001
     rel = relative_errors(cloud, res)
     assert max(rel) <= limit, rel
-    # 24 neighbors, 16 or 12 only where the 24-point fit is far from exact (none here mostly)
-    assert set(np.unique(res.neighbor_count)) <= {12, 16, 24}
+    # 24 neighbors, 16 or 12 only where the 24-point fit is far from exact (none here mostly);
+    # inside, no other size; by the Bezier patch's border a few (10 of 10,000) implicit fits
+    # the height quadric does not confirm take the anchored fits (curvature.fitting.height_check)
+    assert set(np.unique(res.neighbor_count[cloud.interior])) <= {12, 16, 24}
+    assert np.mean(~np.isin(res.neighbor_count, [12, 16, 24])) < 0.002
     assert np.mean(res.neighbor_count == 24) > 0.9
 
 
