@@ -97,7 +97,12 @@ from ..fitting.rounded_edge import (
     worth_trying,
     wraps,
 )
-from ..fitting.scale_selection import DEFAULT_GAMMA, RIDGE_POOL, multiscale_anchor_fits
+from ..fitting.scale_selection import (
+    DEFAULT_GAMMA,
+    RIDGE_POOL,
+    TURN_MONGE_K,
+    multiscale_anchor_fits,
+)
 from ..fitting.shifted import adopt_neighbor_fits
 from ..memory import release_freed_memory
 from ..neighborhoods.kdtree import build_tree, knn_parallel
@@ -831,6 +836,9 @@ class AutoRun:
         self.hash_share = 1.0
         # RMS neighbor distance of each clean fit (its standard error's unit)
         self.clean_h = np.empty(points.shape[0]) if self.plan.clean else None
+        # PCA normals over TURN_MONGE_K neighbors, which the Monge rungs' curvature must turn
+        # (scale_selection.ladder_estimates; noisy clouds, not a dense cloud's thinned share)
+        self.turn_normals: np.ndarray | None = None
         # Whether the fits may reach beyond BASE_K (fit_k); not on a dense cloud's thinned
         # share
         self.widen = True
@@ -877,6 +885,8 @@ class AutoRun:
         reps, owner = grid_cells(self.points, np.asarray(self.plan.origin), self.plan.cell,
                                  avoid=self.outliers)
         field[self.outliers] = np.nan
+        if self.turn_normals is not None:
+            self.turn_normals[self.outliers] = np.nan
         self._total += 0 if self.plan.clean else 2 * reps.shape[0]
         self.timings["stage1"] = time.perf_counter() - t0
         if self.track_reach:
@@ -950,6 +960,8 @@ class AutoRun:
         r_isolation = np.empty(n)
         flat = np.empty(n)
         rows, shifts = [np.empty(0, np.int64)], [np.empty((0, 3))]
+        if not self.plan.clean:
+            self.turn_normals = np.empty((n, 3))
         # the sheet test's candidates and their nearest neighbors (_off_sheets)
         walls, wall_nbr = [np.empty(0, np.int64)], [np.empty((0, min(OWN_SHEET_K, k)), np.int32)]
         for sl in self._chunks(n):
@@ -960,6 +972,9 @@ class AutoRun:
             if graph is not None:
                 graph[sl] = nbr[:, :graph.shape[1]]
             pca_flatness(self.points, query, *_prefix_csr(nbr, normal_k), field[sl], flat[sl])
+            if self.turn_normals is not None:
+                pca_normals(self.points, query, *_prefix_csr(nbr, min(TURN_MONGE_K, k)),
+                            self.turn_normals[sl])
             off_surface(self.points, query, np.ascontiguousarray(nbr[:, :normal_k]), field[sl],
                         self.plan.spacing, self.outliers[sl])
             if not self.plan.clean:
@@ -2101,7 +2116,8 @@ class AutoRun:
                                    query, indptr, indices,
                                    self.params["nfr_ratio"], ladder, kinds, tops, strides,
                                    gamma, scale_selection.SIGMA_GROWTH, calib,
-                                   side_limit(self.params, self.plan, self.widen), *parts)
+                                   side_limit(self.params, self.plan, self.widen), *parts,
+                                   self.turn_normals)
             if rows is not None:
                 for out, part in zip(outputs, parts, strict=True):
                     out[at] = part

@@ -64,8 +64,8 @@ from .quadric import DEGENERATE, OK, foot_point, gradient_at, sampson_rms, shape
 
 __all__ = ["BORDER_SIDE", "DEFAULT_GAMMA", "DESIGN_ISOTROPIC", "KIND_MONGE", "KIND_MONGE_RIDGE",
            "KIND_NORMAL_QUADRIC", "RUNGS", "RUNG_GROWTH", "SIGMA_FLOOR", "TOPS", "TURN_GUARD",
-           "TURN_SLACK", "design_spread", "ladder_estimates", "multiscale_anchor_fits",
-           "one_sided", "pass_rungs", "scale_sigma", "turn_supports"]
+           "TURN_MONGE_K", "TURN_SLACK", "design_spread", "ladder_estimates",
+           "multiscale_anchor_fits", "one_sided", "pass_rungs", "scale_sigma", "turn_supports"]
 
 #: Rung models: a positional Monge quadric, the normal-constrained quadric, or a Monge
 #: quadric with CIRCULAR_ROUNDS of the circular correction (kernels.fit_monge). On a filleted
@@ -268,6 +268,15 @@ FOOT_LIMIT = 2.0
 #: step 43); no smooth shape's figure moved.
 TURN_GUARD = 2.0
 TURN_SLACK = 0.1
+#: The same guard on the circular and isotropic Monge rungs (24 and 48 points) reads PCA
+#: normals over this many neighbors. Against the normals the rungs fit (in the second pass
+#: the first pass's, fitted over 96 to 384 points) it flattened detail of a few spacings: a
+#: sine wave of 10 spacings' wavelength, slope 0.3, erred 10.8 / 10.7 / 10.9 instead of 2.4 /
+#: 3.2 / 4.2 noise-free / at 0.05 / 0.1 %. The stage-1 PCA over 48 reads over both faces of a
+#: thin wall by its ends and cut: flat points erring above 5 over four grids and three seeds,
+#: the blade's 2 -> 2 and the plate's 30 -> 22; over 12, 2 -> 1 and 30 -> 11, the wave as
+#: before (docs/accuracy.md, section 9, step 45).
+TURN_MONGE_K = 12
 #: The calibrated sigma of a Monge rung assumes its points spread around the anchor as in
 #: the cloud's interior. A patch cut by the cloud's border (a half-disk) determines the
 #: quadratic terms about 3.4 times worse: :func:`design_spread` is sqrt(s) times the largest
@@ -656,7 +665,8 @@ def turn_supports(field, p, nbr, k, h):
 
 
 @njit(cache=True)
-def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out, fit_long=True):
+def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out, fit_long=True,
+                     turn=None):
     """Every rung's fit at one anchor (rungs not smaller than the full list are skipped; the
     long ridge rung only with ``fit_long``).
 
@@ -679,6 +689,10 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out, fit_long=
     fit_long : bool
         Whether to fit the long ridge rung (else it is left unusable; :func:`_ridge_rung` fits
         it later from the frame returned).
+    turn : ndarray, shape (n, 3), optional
+        Normals read over few neighbors (:data:`TURN_MONGE_K`, sign arbitrary): a circular or
+        isotropic Monge rung is not used where they do not turn for its curvature
+        (:func:`turn_supports`); None: not checked.
 
     Returns
     -------
@@ -721,6 +735,9 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out, fit_long=
                                                          quads[li], rounds, frame)
             if side > BORDER_SIDE:  # a patch cut by the cloud's border
                 inflate = max(1.0, design / (DESIGN_SLACK * DESIGN_ISOTROPIC))
+            if turn is not None and st == OK and \
+                    not turn_supports(turn, p, nbr[:s], max(abs(c1), abs(c2)), h):
+                st = DEGENERATE
             if st == OK and kinds[li] == KIND_MONGE_CIRCULAR:
                 # A ridge's direction: its curvature well below the one across it.
                 small, big = min(abs(c1), abs(c2)), max(abs(c1), abs(c2))
@@ -1085,7 +1102,7 @@ def _witnesses(est, sg, kinds, t_status, t_model, levels):
 def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, ladder, kinds,
                            tops, strides, gamma, growth, calib, side_limit, coef, scale, frame,
                            quad, quad_scale, model, residual, status, chosen, sigma, bias,
-                           longer):
+                           longer, turn=None):
     """Fits at anchors with the neighborhood size chosen per anchor (module docstring).
 
     Parameters
@@ -1127,6 +1144,8 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
         Output: whether the anchor would fit the long ridge rung (:data:`RIDGE_LONG_TURN`)
         but its list is shorter than :data:`RIDGE_LONG_POOL` (and than the cloud): fitted
         again from such a list, it may keep that rung (every other fit reads the same).
+    turn : ndarray, shape (n, 3), optional
+        As for :func:`ladder_estimates`.
     """
     levels = ladder.shape[0]
     ntop = tops.shape[0]
@@ -1145,7 +1164,8 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
         quads = np.empty((levels, N_QUAD))
         est = np.empty((levels + ntop, 8))
         # (the long ridge rung only where it is wanted, below: its pool is most of a long list)
-        ridge_frame = ladder_estimates(points, field, p, nbr, ladder, kinds, quads, est, False)
+        ridge_frame = ladder_estimates(points, field, p, nbr, ladder, kinds, quads, est, False,
+                                       turn)
         # Every top's full fit (both models) into scratch rows; the kept one is copied out.
         t_coef = np.empty((ntop,) + coef.shape[1:])
         t_quad = np.empty((ntop, N_QUAD))
