@@ -268,9 +268,10 @@ FOOT_LIMIT = 2.0
 #: step 43); no smooth shape's figure moved.
 TURN_GUARD = 2.0
 TURN_SLACK = 0.1
-#: The same guard on the circular and isotropic Monge rungs (24 and 48 points) reads PCA
-#: normals over this many neighbors. Against the normals the rungs fit (in the second pass
-#: the first pass's, fitted over 96 to 384 points) it flattened detail of a few spacings: a
+#: The same guard on the circular, isotropic and ridge Monge rungs reads PCA normals over
+#: this many neighbors (from the anchor's and from their mean, :func:`_turn_agrees`).
+#: Against the normals the rungs fit (in the second pass the first pass's, fitted over 96
+#: to 384 points) it flattened detail of a few spacings: a
 #: sine wave of 10 spacings' wavelength, slope 0.3, erred 10.8 / 10.7 / 10.9 instead of 2.4 /
 #: 3.2 / 4.2 noise-free / at 0.05 / 0.1 %. The stage-1 PCA over 48 reads over both faces of a
 #: thin wall by its ends and cut: flat points erring above 5 over four grids and three seeds,
@@ -602,10 +603,11 @@ def _store_rung(row, st, c1, c2, d, h, spread, inflate, misfit, positional):
 
 
 @njit(cache=True)
-def _ridge_rung(points, field, p, nbr, s, kind, frame, quad, row):
+def _ridge_rung(points, field, p, nbr, s, kind, frame, quad, row, turn=None):
     """A ridge rung's fit (``kind``, ``s`` points) at anchor p into ``quad`` and ``row`` (as
     :func:`ladder_estimates`' ``out``), its patch stretched along ``frame[1]`` (the
-    directions of the circular rung that framed it, :func:`_monge_rung`)."""
+    directions of the circular rung that framed it, :func:`_monge_rung`); not used where the
+    normals ``turn`` (if given) do not turn for it across the ridge (:func:`turn_supports`)."""
     row[0] = 0.0
     row[6] = 1.0
     row[7] = 0.0
@@ -623,22 +625,27 @@ def _ridge_rung(points, field, p, nbr, s, kind, frame, quad, row):
                                      (DESIGN_RIDGE_LONG if long else DESIGN_RIDGE)))
     if st == OK and spread > 0.0:
         h = _to_unit(quad, h, spread)
+    # (h is now the patch's RMS width across the ridge, over which the normals turn)
+    if turn is not None and st == OK and \
+            not _turn_agrees(turn, p, patch, max(abs(c1), abs(c2)), h):
+        st = DEGENERATE
     _store_rung(row, st, c1, c2, d, h, spread, inflate, 0.0, True)
 
 
 @njit(cache=True)
-def turn_supports(field, p, nbr, k, h):
-    """Whether the normals of ``nbr`` turn from p's enough for a curvature ``k`` over RMS
+def turn_supports(field, ref, nbr, k, h):
+    """Whether the normals of ``nbr`` turn from ``ref`` enough for a curvature ``k`` over RMS
     radius ``h`` (:data:`TURN_GUARD`).
 
     Parameters
     ----------
     field : ndarray, shape (n, 3)
         Unit normals, sign arbitrary (NaN: left out).
-    p : int
+    ref : ndarray, shape (3,)
+        The unit normal at the anchor the angles are read from.
     nbr : ndarray, shape (m,)
     k, h : float
-        The largest principal curvature's size, and the points' RMS distance from p.
+        The largest principal curvature's size, and the points' RMS distance from the anchor.
 
     Returns
     -------
@@ -647,21 +654,63 @@ def turn_supports(field, p, nbr, k, h):
     """
     if k * h <= TURN_SLACK:  # (most rungs: no angle needed)
         return True
-    m = nbr.shape[0]
-    dots = np.empty(m)
+    turned = _turned(field, ref, nbr)
+    return turned < 0.0 or k * h <= TURN_GUARD * turned + TURN_SLACK
+
+
+@njit(cache=True)
+def _turned(field, ref, nbr):
+    """The 90th percentile of the angles between ``ref`` and the normals ``field[nbr]``
+    (sign arbitrary, NaN left out), radians; -1 where fewer than 8 are known."""
+    dots = np.empty(nbr.shape[0])
     c = 0
-    for i in range(m):
+    for i in range(nbr.shape[0]):
         q = nbr[i]
-        dot = abs(field[p, 0] * field[q, 0] + field[p, 1] * field[q, 1]
-                  + field[p, 2] * field[q, 2])
+        dot = abs(ref[0] * field[q, 0] + ref[1] * field[q, 1] + ref[2] * field[q, 2])
         if np.isfinite(dot):
             dots[c] = min(dot, 1.0)
             c += 1
     if c < 8:
-        return True
+        return -1.0
     # the 90th percentile of the angles is the arccosine of the 10th of the cosines
-    turned = np.arccos(np.sort(dots[:c])[c - 1 - int(0.9 * (c - 1))])
-    return k * h <= TURN_GUARD * turned + TURN_SLACK
+    kth = c - 1 - int(0.9 * (c - 1))
+    return np.arccos(np.partition(dots[:c], kth)[kth])
+
+
+@njit(cache=True)
+def _turn_agrees(turn, p, nbr, k, h):
+    """:func:`turn_supports` read from both p's own ``turn`` normal and the mean of the
+    normals of ``nbr`` (each turned to the side of p's first). By a thin wall's border p's
+    12-point PCA normal may reach a point of the other face: tilted 58 degrees from its
+    neighbors', it saw them all turned and passed a 48-point rung reading 22.7 on a flat face
+    (the rung's own fitted normal was 44 degrees off there too)."""
+    kh = k * h
+    if kh <= TURN_SLACK:
+        return True
+    ref = turn[p]
+    dots = np.empty(nbr.shape[0])
+    mean = np.zeros(3)
+    c = 0
+    for i in range(nbr.shape[0]):
+        n = turn[nbr[i]]
+        dot = ref[0] * n[0] + ref[1] * n[1] + ref[2] * n[2]
+        if np.isfinite(dot):
+            dots[c] = min(abs(dot), 1.0)
+            mean += n if dot >= 0.0 else -n
+            c += 1
+    if c < 8:
+        return True
+    kth = c - 1 - int(0.9 * (c - 1))
+    turned = np.arccos(np.partition(dots[:c], kth)[kth])
+    if kh > TURN_GUARD * turned + TURN_SLACK:
+        return False
+    mean /= np.sqrt(mean[0] * mean[0] + mean[1] * mean[1] + mean[2] * mean[2])
+    # Read from the mean, every angle is at least the one from p's normal less the angle
+    # between the two: most anchors need no second reading.
+    apart = np.arccos(min(abs(mean[0] * ref[0] + mean[1] * ref[1] + mean[2] * ref[2]), 1.0))
+    if kh <= TURN_GUARD * (turned - apart) + TURN_SLACK:
+        return True
+    return turn_supports(turn, mean, nbr, k, h)
 
 
 @njit(cache=True)
@@ -690,9 +739,9 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out, fit_long=
         Whether to fit the long ridge rung (else it is left unusable; :func:`_ridge_rung` fits
         it later from the frame returned).
     turn : ndarray, shape (n, 3), optional
-        Normals read over few neighbors (:data:`TURN_MONGE_K`, sign arbitrary): a circular or
-        isotropic Monge rung is not used where they do not turn for its curvature
-        (:func:`turn_supports`); None: not checked.
+        Normals read over few neighbors (:data:`TURN_MONGE_K`, sign arbitrary): a circular,
+        isotropic or ridge Monge rung is not used where they do not turn for its curvature
+        (:func:`_turn_agrees`); None: not checked.
 
     Returns
     -------
@@ -721,7 +770,8 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out, fit_long=
                 ridge_frame[:] = frame
             wanted = not long or fit_long and _long_pool(nbr.shape[0], points.shape[0])
             if framed and 2 * s <= nbr.shape[0] and wanted:
-                _ridge_rung(points, field, p, nbr, s, kinds[li], frame, quads[li], out[li])
+                _ridge_rung(points, field, p, nbr, s, kinds[li], frame, quads[li], out[li],
+                            turn)
             continue
         elif s >= nbr.shape[0]:
             continue
@@ -736,7 +786,7 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out, fit_long=
             if side > BORDER_SIDE:  # a patch cut by the cloud's border
                 inflate = max(1.0, design / (DESIGN_SLACK * DESIGN_ISOTROPIC))
             if turn is not None and st == OK and \
-                    not turn_supports(turn, p, nbr[:s], max(abs(c1), abs(c2)), h):
+                    not _turn_agrees(turn, p, nbr[:s], max(abs(c1), abs(c2)), h):
                 st = DEGENERATE
             if st == OK and kinds[li] == KIND_MONGE_CIRCULAR:
                 # A ridge's direction: its curvature well below the one across it.
@@ -747,8 +797,8 @@ def ladder_estimates(points, field, p, nbr, ladder, kinds, quads, out, fit_long=
                                                       quads[li])
             if st == OK:
                 st, c1, c2, _, _, _ = curvature_from_quadric(quads[li], h, origin, FOOT_LIMIT)
-                if st == OK and not turn_supports(field, p, nbr[:s], max(abs(c1), abs(c2)),
-                                                  h):
+                if st == OK and not turn_supports(field, field[p], nbr[:s],
+                                                  max(abs(c1), abs(c2)), h):
                     st = DEGENERATE
         _store_rung(out[li], st, c1, c2, d, h, spread, inflate, misfit,
                     kinds[li] != KIND_NORMAL_QUADRIC)
@@ -1239,7 +1289,7 @@ def multiscale_anchor_fits(points, field, anchors, indptr, indices, nfr_ratio, l
             longer[j] = not _long_pool(full, points.shape[0])
             if not longer[j] and 2 * ladder[long_rung] <= full:
                 _ridge_rung(points, field, p, nbr, ladder[long_rung], KIND_MONGE_RIDGE_LONG,
-                           ridge_frame, quads[long_rung], est[long_rung])
+                           ridge_frame, quads[long_rung], est[long_rung], turn)
                 if est[long_rung, 0] == 1.0:
                     sg[long_rung] = scale_sigma(est[long_rung, 3], est[long_rung, 5],
                                                 sizes[long_rung], calib[long_rung])
