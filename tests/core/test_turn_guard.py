@@ -1,5 +1,6 @@
-"""A normal-quadric rung's curvature must be one its normals turn for
-(scale_selection.turn_supports)."""
+"""A rung's curvature must be one its points' normals turn for: the normal-quadric rungs'
+against the normals they fit (scale_selection.turn_supports), the Monge rungs' against
+normals over few neighbors, read from the anchor's and from their mean (_turn_agrees)."""
 
 from __future__ import annotations
 
