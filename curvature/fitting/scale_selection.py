@@ -271,9 +271,9 @@ TURN_SLACK = 0.1
 #: The same guard on the circular, isotropic and ridge Monge rungs reads PCA normals over
 #: this many neighbors (from the anchor's and from their mean, :func:`_turn_agrees`).
 #: Against the normals the rungs fit (in the second pass the first pass's, fitted over 96
-#: to 384 points) it flattened detail of a few spacings: a
-#: sine wave of 10 spacings' wavelength, slope 0.3, erred 10.8 / 10.7 / 10.9 instead of 2.4 /
-#: 3.2 / 4.2 noise-free / at 0.05 / 0.1 %. The stage-1 PCA over 48 reads over both faces of a
+#: to 384 points) it flattened detail of a few spacings: a sine wave of 10 spacings'
+#: wavelength, slope 0.3, erred 10.8 / 10.7 / 10.9 instead of 2.4 / 3.2 / 4.2 noise-free /
+#: at 0.05 / 0.1 %. The stage-1 PCA over 48 reads over both faces of a
 #: thin wall by its ends and cut: flat points erring above 5 over four grids and three seeds,
 #: the blade's 2 -> 2 and the plate's 30 -> 22; over 12, 2 -> 1 and 30 -> 11, the wave as
 #: before (docs/accuracy.md, section 9, step 45).
@@ -607,7 +607,7 @@ def _ridge_rung(points, field, p, nbr, s, kind, frame, quad, row, turn=None):
     """A ridge rung's fit (``kind``, ``s`` points) at anchor p into ``quad`` and ``row`` (as
     :func:`ladder_estimates`' ``out``), its patch stretched along ``frame[1]`` (the
     directions of the circular rung that framed it, :func:`_monge_rung`); not used where the
-    normals ``turn`` (if given) do not turn for it across the ridge (:func:`turn_supports`)."""
+    normals ``turn`` (if given) do not turn for it across the ridge (:func:`_turn_agrees`)."""
     row[0] = 0.0
     row[6] = 1.0
     row[7] = 0.0
@@ -654,27 +654,30 @@ def turn_supports(field, ref, nbr, k, h):
     """
     if k * h <= TURN_SLACK:  # (most rungs: no angle needed)
         return True
-    turned = _turned(field, ref, nbr)
+    turned, _ = _turned(field, ref, nbr)
     return turned < 0.0 or k * h <= TURN_GUARD * turned + TURN_SLACK
 
 
 @njit(cache=True)
 def _turned(field, ref, nbr):
     """The 90th percentile of the angles between ``ref`` and the normals ``field[nbr]``
-    (sign arbitrary, NaN left out), radians; -1 where fewer than 8 are known."""
+    (sign arbitrary, NaN left out), radians (-1 where fewer than 8 are known), and the sum of
+    those normals, each turned to the side of ``ref``, shape (3,)."""
     dots = np.empty(nbr.shape[0])
+    total = np.zeros(3)
     c = 0
     for i in range(nbr.shape[0]):
-        q = nbr[i]
-        dot = abs(ref[0] * field[q, 0] + ref[1] * field[q, 1] + ref[2] * field[q, 2])
+        n = field[nbr[i]]
+        dot = ref[0] * n[0] + ref[1] * n[1] + ref[2] * n[2]
         if np.isfinite(dot):
-            dots[c] = min(dot, 1.0)
+            dots[c] = min(abs(dot), 1.0)
+            total += n if dot >= 0.0 else -n
             c += 1
     if c < 8:
-        return -1.0
+        return -1.0, total
     # the 90th percentile of the angles is the arccosine of the 10th of the cosines
     kth = c - 1 - int(0.9 * (c - 1))
-    return np.arccos(np.partition(dots[:c], kth)[kth])
+    return np.arccos(np.partition(dots[:c], kth)[kth]), total
 
 
 @njit(cache=True)
@@ -688,20 +691,9 @@ def _turn_agrees(turn, p, nbr, k, h):
     if kh <= TURN_SLACK:
         return True
     ref = turn[p]
-    dots = np.empty(nbr.shape[0])
-    mean = np.zeros(3)
-    c = 0
-    for i in range(nbr.shape[0]):
-        n = turn[nbr[i]]
-        dot = ref[0] * n[0] + ref[1] * n[1] + ref[2] * n[2]
-        if np.isfinite(dot):
-            dots[c] = min(abs(dot), 1.0)
-            mean += n if dot >= 0.0 else -n
-            c += 1
-    if c < 8:
+    turned, mean = _turned(turn, ref, nbr)
+    if turned < 0.0:
         return True
-    kth = c - 1 - int(0.9 * (c - 1))
-    turned = np.arccos(np.partition(dots[:c], kth)[kth])
     if kh > TURN_GUARD * turned + TURN_SLACK:
         return False
     mean /= np.sqrt(mean[0] * mean[0] + mean[1] * mean[1] + mean[2] * mean[2])
