@@ -294,6 +294,9 @@ READ_CIRCLES = 4
 SHEET_DISTANCE = 2.0
 # Neighbors looked at beyond normal_k when the outliers are left out of a stage-1 normal.
 RENORMAL_EXTRA = 16
+#: Rounds of the outlier test again at the points whose neighbors lost an outlier (each
+#: round at the neighbors of the points the last one flagged).
+UNMASK_ROUNDS = 2
 # Neighbors of the wide noise measurement (AutoPlan.wide_noise).
 DENSE_K = 192
 # Largest ratio of the wide to the 24-neighbor relative noise of a dense cloud.
@@ -1088,12 +1091,18 @@ class AutoRun:
         plan's cubic-fit residual over :data:`NOISE_RESIDUAL_SHARE`."""
         return self.plan.cubic_noise * self.plan.spacing / NOISE_RESIDUAL_SHARE
 
-    def _normals_without_outliers(self, field, r_normal, normal_k, out=None) -> np.ndarray:
+    def _normals_without_outliers(self, field, r_normal, normal_k, out=None,
+                                  rounds=UNMASK_ROUNDS) -> np.ndarray:
         """Stage-1 normals again, without the outliers, where one (of ``out``, int64, if
-        given; else any) was among the neighbors.
+        given; else any) was among the neighbors; and those points' outlier test
+        (:func:`~curvature.fitting.outliers.off_surface`) again without them, up to
+        ``rounds`` times more for the points it flags.
 
         One outlier a spacing off a face tilts the PCA normals of every point that has it among
-        its ``normal_k`` neighbors, and the normal fits then read that tilt as curvature.
+        its ``normal_k`` neighbors, and the normal fits then read that tilt as curvature. Two
+        outliers near each other hide each other: each raises the other's neighbors'
+        thickness (the blade's seed 1: one 9 noise off a side by its border was not flagged
+        while one 16 noise off stood among its neighbors).
         Returns the rows whose normals were refitted (int64).
         """
         if out is None:
@@ -1104,6 +1113,7 @@ class AutoRun:
                                                 workers=numba.get_num_threads())
         hit = np.flatnonzero((d <= r_normal) & ~self.outliers).astype(np.int64)
         k = min(normal_k + RENORMAL_EXTRA, self.points.shape[0] - 1)
+        fresh = [np.empty(0, np.int64)]
         for start in range(0, hit.size, self.chunk_size):
             rows = hit[start:start + self.chunk_size]
             _, indices, d2 = knn_csr(self.points, self.tree, rows, k)
@@ -1118,7 +1128,19 @@ class AutoRun:
             field[rows] = normals
             last = np.where(use, np.sqrt(d2), 0.0).max(axis=1)
             r_normal[rows] = np.maximum(r_normal[rows], last)
-        return hit
+            if rounds > 0:
+                full = np.flatnonzero(counts == normal_k)  # (fewer: too many outliers near)
+                found = np.zeros(full.size, bool)
+                off_surface(self.points, rows[full], nbr[full][use[full]].reshape(-1, normal_k),
+                            normals[full], self.plan.spacing, found)
+                fresh.append(rows[full[found]])
+        fresh = np.concatenate(fresh)
+        if fresh.size == 0:
+            return hit
+        # all flagged at once: a point's verdict does not depend on the chunk it was in
+        self.outliers[fresh] = True
+        again = self._normals_without_outliers(field, r_normal, normal_k, fresh, rounds - 1)
+        return np.union1d(hit, again)
 
     def _clean_fits(self, res, sl, query, nbr, d2, kp) -> None:
         """Implicit quadrics of a chunk of a clean cloud, written to ``res`` rows ``sl``.

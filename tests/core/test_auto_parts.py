@@ -290,8 +290,10 @@ def test_a_thin_plates_faces_read_flat_up_to_its_open_border_also_with_outliers(
     # Within a spacing of the plate's cut (z = 0 and 1) a point's nearest 24 hold the other
     # face, behind it only: fits over both read the cut as a rim. Measured (seed 1): that
     # band 1.82 before its fits kept to one face (stop 59), 0.48 now; the faces 0.126 ->
-    # 0.081. With 1 % outliers the faces read 0.106 (0.191 at stop 58; with every true
-    # outlier flagged, 0.074).
+    # 0.081. With 1 % outliers the faces read 0.102 at stop 62, 1.33 times the clean
+    # cloud's 0.076 (0.191 at stop 58): two outliers in the gap past the top cut, one
+    # tilting the faces' planes the other was judged by, were not flagged (step 47 of
+    # docs/accuracy.md, section 9); now 0.082, 1.07 times (with every outlier flagged 0.069).
     clean, dirty = (synthetic.thin_plate(noise=0.1, seed=1, outliers=share)
                     for share in (0.0, 0.01))
     res, res_dirty = (curvature.estimate(c.points, normals=c.normals) for c in (clean, dirty))
@@ -300,7 +302,25 @@ def test_a_thin_plates_faces_read_flat_up_to_its_open_border_also_with_outliers(
     cut = face & (np.minimum(z - z.min(), z.max() - z) < clean.params["spacing"])
     assert np.mean(worst(clean, res)[cut]) < 0.8
     assert np.mean(worst(clean, res)[face]) < 0.1
-    assert np.nanmean(worst(dirty, res_dirty)[dirty.region_mask("face")]) < 0.12
+    # issue 15: the inliers' errors rise by at most 20 % with 1 % outliers
+    assert (np.nanmean(worst(dirty, res_dirty)[dirty.region_mask("face")])
+            <= 1.2 * np.mean(worst(clean, res)[face]))
+
+
+def test_two_outliers_near_each_other_do_not_hide_each_other():
+    # On the blade (seed 1, 1 % outliers) one outlier lies 9 noise off a side just past its
+    # top, 0.7 spacings out, with another 16 noise off among its 48 neighbors: that one
+    # raised their thickness to 2.5 noise, and the offset test let the first pass. Eleven
+    # points of the side below it then read errors of 1.2 to 6.9 (stop 62); now the points
+    # whose neighbors lost an outlier are tested again without it
+    # (AutoRun._normals_without_outliers), and none of them errs more than 0.11.
+    cloud = synthetic.blade(noise=0.1, seed=1, outliers=0.01)
+    res = curvature.estimate(cloud.points, normals=cloud.normals)
+    near = (cloud.region_mask("side")
+            & (np.linalg.norm(cloud.points - [1.195, -0.106, 1.01], axis=1)
+               < 5 * cloud.params["spacing"]))
+    assert near.sum() >= 10
+    assert np.max(worst(cloud, res)[near]) < 1.0
 
 
 @pytest.mark.parametrize("seed, shift", [(1, 0.0), (1, 1.0), (2, 0.0), (2, 1.0)])
