@@ -30,8 +30,8 @@ from numba import njit, prange
 from .quadric import tangent_basis
 
 __all__ = ["END_SIDE", "SHEET_GAP", "SHEET_K", "SHEET_SHARE", "SHEET_SLOPE", "WEDGE_ROUNDS",
-           "WEDGE_SEED", "WEDGE_SEED_LEAST", "at_an_end", "own_sheet_lists", "parallel_sheets",
-           "sheet_gap", "sheet_heights", "sheet_split", "wedge_split"]
+           "WEDGE_SEED", "WEDGE_SEED_LEAST", "at_an_end", "faces_parallel", "own_sheet_lists",
+           "parallel_sheets", "sheet_gap", "sheet_heights", "sheet_split", "wedge_split"]
 
 #: Neighbors of the test: on the thin plate of 10,000 points (faces 3 spacings apart) the 48
 #: nearest hold a fifth of the other face, the 96 nearest a third.
@@ -163,7 +163,7 @@ def sheet_gap(h, least):
 
 
 @njit(cache=True)
-def _parallel(h, u, v, order, split):
+def faces_parallel(h, u, v, order, split):
     """Whether the planes fitted to the lower ``split`` and the other heights ``h`` (in
     ascending ``order``, at tangent coordinates ``u, v``) have slopes within
     :data:`SHEET_SLOPE`."""
@@ -180,7 +180,7 @@ def sheet_split(h, u, v):
     (module docstring): as :func:`sheet_gap`, with ``split = -1`` also where the planes
     fitted to the two groups are not parallel."""
     order, split = sheet_gap(h, max(int(SHEET_SHARE * h.shape[0]), 3))
-    if split < 0 or not _parallel(h, u, v, order, split):
+    if split < 0 or not faces_parallel(h, u, v, order, split):
         return order, -1
     return order, split
 
@@ -327,7 +327,7 @@ def own_sheet_lists(points, anchors, normals, indptr, indices, test, excluded, k
         h, u, v, where = sheet_heights(points, p, nrm, indices[lo:hi], excluded)
         order, split = sheet_gap(h, max(int(SHEET_SHARE * h.shape[0]), 3))
         end = at_an_end(u, v)
-        if split >= 0 and (end or _parallel(h, u, v, order, split)):
+        if split >= 0 and (end or faces_parallel(h, u, v, order, split)):
             # the anchor's height is 0: its sheet is the group on its side of the gap's middle
             low_own = 0.0 < 0.5 * (h[order[split - 1]] + h[order[split]])
             start, stop = (split, h.shape[0]) if low_own else (0, split)
