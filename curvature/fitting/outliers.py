@@ -242,19 +242,11 @@ def isolated(points: np.ndarray, tree: tuple, reach: np.ndarray, out: np.ndarray
 
 
 @njit(cache=True)
-def _parallel_offsets(h, u, v, order, split):
-    """Two parallel planes ``h = a_g + b u + c v`` fitted to the groups ``order[:split]``
-    and ``order[split:]`` (one slope, one height each): returns their heights at the origin
-    and the points' RMS distance from them, (a_low, a_high, rms); NaN where the points span
-    no plane."""
-    a_low, a_high, _, _, rms = _parallel_planes(h, u, v, order, split)
-    return a_low, a_high, rms
-
-
-@njit(cache=True)
 def _parallel_planes(h, u, v, order, split):
-    """As :func:`_parallel_offsets`, with the planes' common slope: (a_low, a_high, b, c,
-    rms)."""
+    """Two parallel planes ``h = a_g + b u + c v`` fitted to the groups ``order[:split]``
+    and ``order[split:]`` (one slope, one height each): returns their heights at the origin,
+    their common slope and the points' RMS distance from them, (a_low, a_high, b, c, rms);
+    NaN where the points span no plane."""
     m = order.shape[0]
     mean = np.zeros((2, 3))  # per group: u, v, h
     for c in range(m):
@@ -450,7 +442,7 @@ def between_faces(points, query, nbr, normals, excluded, noise, out):
         h, u, v, _ = sheet_heights(points, query[j], nrm, nbr[j], excluded)
         # One slope for both faces: the farther face often holds only a few points at the
         # list's edge, whose own plane would tilt with their noise.
-        a_low, a_high, rms = _parallel_offsets(h, u, v, order, split)
+        a_low, a_high, _, _, rms = _parallel_planes(h, u, v, order, split)
         # (NaN compares False: faces that span no plane flag nothing)
         out[j] = (min(abs(a_low), abs(a_high))
                   > FACE_SIGMAS * max(rms, FACE_TRIM_RMS * first, noise))

@@ -140,6 +140,18 @@ def _between_faces_flags(pts, normals, noise):
     return flags
 
 
+def _cut_wall(rng, noise, extra):
+    """A parallel wall 0.1 thick cut open at x = 0 (4,500 noisy points on each face, x in
+    [-6, 0], y in [0, 6]) with the points ``extra`` (e, 3) appended: (points, normals), the
+    faces' normals +z, the extra points' NaN."""
+    uv = rng.uniform(0.0, 6.0, (9000, 2))
+    lower = np.c_[uv[:4500] - [6.0, 0.0], rng.normal(0.0, noise, 4500)]
+    upper = np.c_[uv[4500:] - [6.0, 0.0], 0.1 + rng.normal(0.0, noise, 4500)]
+    extra = np.asarray(extra, float)
+    normals = np.r_[np.tile([0.0, 0.0, 1.0], (9000, 1)), np.full(extra.shape, np.nan)]
+    return np.r_[lower, upper, extra], normals
+
+
 def test_a_blades_trailing_tip_is_not_flagged_and_a_point_by_a_walls_cut_is():
     # The blade's trailing tip (0.1 % noise along the view, seed 2) is 10 noise thick: two
     # of its points lie between its faces' planes, 5 noise off each, with every neighbor
@@ -151,13 +163,8 @@ def test_a_blades_trailing_tip_is_not_flagged_and_a_point_by_a_walls_cut_is():
     assert not flags.any()
     # A parallel wall 0.1 thick cut open at x = 0: a point in its gap by the cut has its
     # neighbors behind it too, but all their normals agree, and it is flagged.
-    rng = np.random.default_rng(12)
     noise = 0.005
-    uv = rng.uniform(0.0, 6.0, (9000, 2))
-    lower = np.c_[uv[:4500] - [6.0, 0.0], rng.normal(0.0, noise, 4500)]
-    upper = np.c_[uv[4500:] - [6.0, 0.0], 0.1 + rng.normal(0.0, noise, 4500)]
-    pts = np.r_[lower, upper, [[-0.05, 3.0, 0.05]]]
-    normals = np.r_[np.tile([0.0, 0.0, 1.0], (9000, 1)), [[np.nan] * 3]]
+    pts, normals = _cut_wall(np.random.default_rng(12), noise, [[-0.05, 3.0, 0.05]])
     np.testing.assert_array_equal(np.flatnonzero(_between_faces_flags(pts, normals, noise)),
                                   [9000])
 
@@ -168,13 +175,9 @@ def test_two_outliers_in_a_walls_gap_by_its_cut_do_not_hide_each_other():
     # is among the other's neighbors, off both faces' planes, and raised their RMS distance:
     # until stop 62 the one inside was not flagged. The faces are fitted again without the
     # points far off the first fit (FACE_TRIM). This seed's faces hold no point 4 noise off.
-    rng = np.random.default_rng(1)
     noise = 0.005
-    uv = rng.uniform(0.0, 6.0, (9000, 2))
-    lower = np.c_[uv[:4500] - [6.0, 0.0], rng.normal(0.0, noise, 4500)]
-    upper = np.c_[uv[4500:] - [6.0, 0.0], 0.1 + rng.normal(0.0, noise, 4500)]
-    pts = np.r_[lower, upper, [[0.12, 3.0, 0.055], [-0.1, 3.05, 0.07]]]
-    normals = np.r_[np.tile([0.0, 0.0, 1.0], (9000, 1)), [[np.nan] * 3] * 2]
+    pts, normals = _cut_wall(np.random.default_rng(1), noise,
+                             [[0.12, 3.0, 0.055], [-0.1, 3.05, 0.07]])
     np.testing.assert_array_equal(np.flatnonzero(_between_faces_flags(pts, normals, noise)),
                                   [9000, 9001])
 
@@ -188,11 +191,7 @@ def test_a_point_by_a_walls_cut_is_judged_where_its_neighbors_normals_tilt():
     # parallel, as a wedge's are not. Here a third of the normals tilt 20 degrees.
     rng = np.random.default_rng(12)
     noise = 0.005
-    uv = rng.uniform(0.0, 6.0, (9000, 2))
-    lower = np.c_[uv[:4500] - [6.0, 0.0], rng.normal(0.0, noise, 4500)]
-    upper = np.c_[uv[4500:] - [6.0, 0.0], 0.1 + rng.normal(0.0, noise, 4500)]
-    pts = np.r_[lower, upper, [[0.05, 3.0, 0.05]]]
-    normals = np.r_[np.tile([0.0, 0.0, 1.0], (9000, 1)), [[np.nan] * 3]]
+    pts, normals = _cut_wall(rng, noise, [[0.05, 3.0, 0.05]])
     tilted = rng.random(9000) < 0.35
     normals[:9000][tilted] = [0.0, np.sin(np.radians(20.0)), np.cos(np.radians(20.0))]
     np.testing.assert_array_equal(np.flatnonzero(_between_faces_flags(pts, normals, noise)),
